@@ -1,0 +1,32 @@
+//! # frf-data: FRF datasets and the traits every frfit estimator shares
+//!
+//! - [`FrfDataset`] (implemented by the owning [`Frf`] and the zero-copy [`FrfView`]):
+//!   frequencies, `ny x nu` complex matrices per line, optional per-entry variance;
+//! - [`ModelStructure`] and [`Estimator`] with the [`Fit`] result: an initialiser's
+//!   `Fit` feeds a refiner's `estimate` directly;
+//! - weightings of the least-squares criterion ([`Weighting`]);
+//! - formats: the FRF CSV of `FORMATS.md` and UFF 58 ([`io`]);
+//! - the CMIF and its peak picker ([`cmif`]), delay estimation and compensation
+//!   ([`delay`]);
+//! - simulated experiments (`synth`) and nonparametric FRF estimation from periodic data
+//!   (`nonparametric`).
+
+pub mod dataset;
+pub mod error;
+pub mod estimator;
+pub mod frf;
+pub mod model;
+pub mod shared_data;
+pub mod view;
+pub mod weighting;
+
+pub use dataset::FrfDataset;
+pub use error::{FormatProblem, FrfError};
+pub use estimator::{Convergence, Estimator, Fit, Progress, ProgressFn, ProgressSink, Timing};
+pub use frf::Frf;
+pub use model::ModelStructure;
+pub use view::FrfView;
+pub use weighting::Weighting;
+
+/// Complex double (the same type as `faer::c64` and `realize::C64`).
+pub type C64 = num_complex::Complex<f64>;

@@ -1,0 +1,29 @@
+//! Command-line interface: one module per subcommand. Add a subcommand by adding a
+//! variant to [`Command`] and a module with `Args` and `run`.
+
+use clap::{Parser, Subcommand};
+use frfit::FrfitError;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "frfit",
+    version,
+    about = "Frequency-domain identification of lightly damped MIMO motion systems",
+    long_about = None
+)]
+pub struct Cli {
+    /// Silence progress bars and informational messages.
+    #[arg(long, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> Result<(), FrfitError> {
+    let _quiet = cli.quiet;
+    match cli.command {}
+}

@@ -1,0 +1,14 @@
+//! # frfit: frequency-domain identification of lightly damped MIMO motion systems
+//!
+//! The facade of the workspace: the pipeline (load -> band -> delay -> CMIF -> init ->
+//! refine -> validate -> diagnose -> report), the residual-diagnosis loop, SVG plots and
+//! the `frfit` command-line tool. The estimators live in their own crates and are
+//! re-exported here so that a user can depend on `frfit` alone.
+
+pub mod error;
+pub mod plots;
+
+pub use error::FrfitError;
+
+pub use frf_data;
+pub use realize;

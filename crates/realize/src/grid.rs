@@ -1,0 +1,68 @@
+//! [`ResponseGrid`]: a frequency response sampled at many points.
+
+use crate::C64;
+use faer::Mat;
+
+/// A frequency response sampled at `n` points: one `ny x nu` complex matrix per point,
+/// stored column-major (`vec(G)`), the points one after another. Entry `(i, j)` of point
+/// `k` is `values[k * ny * nu + j * ny + i]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResponseGrid {
+    /// Number of outputs.
+    pub ny: usize,
+    /// Number of inputs.
+    pub nu: usize,
+    /// The values, `n * ny * nu` of them.
+    pub values: Vec<C64>,
+}
+
+impl ResponseGrid {
+    /// A grid of zeros with `n` points.
+    pub fn zeros(n: usize, ny: usize, nu: usize) -> Self {
+        Self {
+            ny,
+            nu,
+            values: vec![C64::new(0.0, 0.0); n * ny * nu],
+        }
+    }
+
+    /// Number of frequency points.
+    pub fn len(&self) -> usize {
+        if self.ny * self.nu == 0 {
+            0
+        } else {
+            self.values.len() / (self.ny * self.nu)
+        }
+    }
+
+    /// True when the grid has no points.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Entry `(i, j)` at point `k`.
+    #[inline]
+    pub fn get(&self, k: usize, i: usize, j: usize) -> C64 {
+        self.values[k * self.ny * self.nu + j * self.ny + i]
+    }
+
+    /// `vec(G)` at point `k` (column-major, length `ny * nu`).
+    #[inline]
+    pub fn line(&self, k: usize) -> &[C64] {
+        let m = self.ny * self.nu;
+        &self.values[k * m..(k + 1) * m]
+    }
+
+    /// Mutable `vec(G)` at point `k`.
+    #[inline]
+    pub fn line_mut(&mut self, k: usize) -> &mut [C64] {
+        let m = self.ny * self.nu;
+        &mut self.values[k * m..(k + 1) * m]
+    }
+
+    /// The matrix at point `k` as a faer matrix.
+    pub fn matrix(&self, k: usize) -> Mat<C64> {
+        let l = self.line(k);
+        Mat::from_fn(self.ny, self.nu, |i, j| l[j * self.ny + i])
+    }
+}

@@ -1,0 +1,34 @@
+//! # realize: linear models and their frequency responses
+//!
+//! The lowest layer of frfit. It holds the model *representations* every estimator
+//! converts to, and the exact evaluation of their frequency response:
+//!
+//! - [`StateSpace`]: `A, B, C, D` (continuous or discrete time) with faer matrices;
+//!   frequency response at many points after one Hessenberg reduction of `A`, correct
+//!   for defective `A` (double integrators);
+//! - [`ModalModel`]: poles with residue matrices plus a real rigid-body (integrator) part
+//!   and a feedthrough; its response is a sum of first-order terms and is cheap;
+//! - exact zero-order-hold discretization (augmented matrix exponential) and the
+//!   frequency response of a continuous model seen through a ZOH sampler with an extra
+//!   delay of `d` samples ([`zoh`]);
+//! - conversions between [`ModalModel`] and a real block-diagonal [`StateSpace`].
+//!
+//! `realize` depends on no other frfit crate: `frf-data` builds its simulated plants
+//! in these types, so it sits above this crate.
+//!
+//! Conventions: frequencies are angular (rad/s) unless a name ends in `_hz`; a
+//! [`ResponseGrid`] stores one `ny x nu` complex matrix per frequency point, column-major
+//! (`vec(G)`), points one after another.
+
+pub mod error;
+pub mod grid;
+pub mod modal;
+pub mod state_space;
+
+pub use error::RealizeError;
+pub use grid::ResponseGrid;
+pub use modal::{ModalModel, PolePair, RealPole};
+pub use state_space::{StateSpace, TimeDomain};
+
+/// Complex double, the scalar of every frequency response (the same type as `faer::c64`).
+pub type C64 = num_complex::Complex<f64>;

@@ -1,0 +1,405 @@
+//! [`ModalModel`]: poles with residue matrices, a real rigid-body (integrator) part and a
+//! feedthrough, and its exact frequency response in continuous time and through a
+//! zero-order hold.
+
+use crate::{RealizeError, ResponseGrid, C64};
+use faer::Mat;
+use serde::{Deserialize, Serialize};
+
+/// One complex-conjugate pole pair `p, conj(p)` (with `Im p > 0`) and its residue `R`:
+/// the pair contributes `R / (s - p) + conj(R) / (s - conj(p))`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PolePair {
+    /// The pole in the upper half plane, rad/s.
+    pub pole: C64,
+    /// The complex `ny x nu` residue of `pole`.
+    pub residue: Mat<C64>,
+}
+
+impl PolePair {
+    /// Undamped natural frequency `|p|` in rad/s.
+    pub fn omega_n(&self) -> f64 {
+        self.pole.norm()
+    }
+    /// Natural frequency `|p| / 2 pi` in Hz.
+    pub fn f_hz(&self) -> f64 {
+        self.pole.norm() / std::f64::consts::TAU
+    }
+    /// Relative damping `-Re p / |p|`.
+    pub fn zeta(&self) -> f64 {
+        -self.pole.re / self.pole.norm()
+    }
+    /// The pair with natural frequency `f_hz` (Hz), damping `zeta` (0 <= zeta < 1) and
+    /// residue `residue` of the upper pole.
+    pub fn from_f_zeta(f_hz: f64, zeta: f64, residue: Mat<C64>) -> Self {
+        let wn = std::f64::consts::TAU * f_hz;
+        let pole = C64::new(-zeta * wn, wn * (1.0 - zeta * zeta).max(0.0).sqrt());
+        Self { pole, residue }
+    }
+    /// The pair whose sum is `B / (s^2 + 2 zeta wn s + wn^2)` for a real constant numerator
+    /// `B` (the flexible-mode form of eq. (26) of the wafer-stage paper, times `wn^2`):
+    /// the residue is `B / (p - conj p) = B / (2 j wd)`.
+    pub fn from_second_order(f_hz: f64, zeta: f64, numerator: &Mat<f64>) -> Self {
+        let wn = std::f64::consts::TAU * f_hz;
+        let wd = wn * (1.0 - zeta * zeta).max(0.0).sqrt();
+        let pole = C64::new(-zeta * wn, wd);
+        let scale = C64::new(0.0, -1.0 / (2.0 * wd));
+        let residue = Mat::from_fn(numerator.nrows(), numerator.ncols(), |i, j| {
+            scale * numerator[(i, j)]
+        });
+        Self { pole, residue }
+    }
+}
+
+/// One real pole `p` with real residue `R`: contributes `R / (s - p)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RealPole {
+    /// The pole, rad/s (negative when stable).
+    pub pole: f64,
+    /// The real `ny x nu` residue.
+    pub residue: Mat<f64>,
+}
+
+/// A continuous-time model in modal (partial-fraction) form:
+///
+/// `P(s) = sum_k rigid[k] / s^(k+1) + sum_pairs (R/(s-p) + conj(R)/(s-conj p))
+///        + sum_real R/(s-p) + D`.
+///
+/// The rigid-body part is real; `rigid[1]` is the `1/s^2` coefficient of a free mass.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModalModel {
+    /// Number of outputs.
+    pub ny: usize,
+    /// Number of inputs.
+    pub nu: usize,
+    /// `rigid[k]` is the real `ny x nu` coefficient of `1 / s^(k+1)`; empty when there
+    /// are no poles at the origin.
+    pub rigid: Vec<Mat<f64>>,
+    /// Complex-conjugate pole pairs.
+    pub pairs: Vec<PolePair>,
+    /// Real poles (not at the origin).
+    pub real_poles: Vec<RealPole>,
+    /// Feedthrough `D` (`ny x nu`, zero when absent).
+    pub feedthrough: Mat<f64>,
+}
+
+/// Summary of a pole pair for reports and JSON: frequency in Hz and damping.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ModeSummary {
+    /// Natural frequency, Hz.
+    pub f_hz: f64,
+    /// Relative damping.
+    pub zeta: f64,
+}
+
+impl ModalModel {
+    /// An empty model (zero response) with `ny` outputs and `nu` inputs.
+    pub fn new(ny: usize, nu: usize) -> Self {
+        Self {
+            ny,
+            nu,
+            rigid: Vec::new(),
+            pairs: Vec::new(),
+            real_poles: Vec::new(),
+            feedthrough: Mat::zeros(ny, nu),
+        }
+    }
+
+    /// Checks that every matrix has shape `ny x nu` and every value is finite.
+    pub fn validate(&self) -> Result<(), RealizeError> {
+        let shape = |what: &str, r: usize, c: usize| -> Result<(), RealizeError> {
+            if r != self.ny || c != self.nu {
+                return Err(RealizeError::Dimension {
+                    what: what.to_string(),
+                    expected: format!("{}x{}", self.ny, self.nu),
+                    got: format!("{r}x{c}"),
+                });
+            }
+            Ok(())
+        };
+        for (k, r) in self.rigid.iter().enumerate() {
+            shape(&format!("rigid[{k}]"), r.nrows(), r.ncols())?;
+            if !all_finite_real(r) {
+                return Err(RealizeError::NonFinite {
+                    what: format!("rigid[{k}]"),
+                });
+            }
+        }
+        for (k, p) in self.pairs.iter().enumerate() {
+            shape(
+                &format!("pairs[{k}].residue"),
+                p.residue.nrows(),
+                p.residue.ncols(),
+            )?;
+            if !(p.pole.re.is_finite() && p.pole.im.is_finite()) || !all_finite_complex(&p.residue)
+            {
+                return Err(RealizeError::NonFinite {
+                    what: format!("pairs[{k}]"),
+                });
+            }
+        }
+        for (k, p) in self.real_poles.iter().enumerate() {
+            shape(
+                &format!("real_poles[{k}].residue"),
+                p.residue.nrows(),
+                p.residue.ncols(),
+            )?;
+            if !p.pole.is_finite() || !all_finite_real(&p.residue) {
+                return Err(RealizeError::NonFinite {
+                    what: format!("real_poles[{k}]"),
+                });
+            }
+        }
+        shape(
+            "feedthrough",
+            self.feedthrough.nrows(),
+            self.feedthrough.ncols(),
+        )?;
+        if !all_finite_real(&self.feedthrough) {
+            return Err(RealizeError::NonFinite {
+                what: "feedthrough".into(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Natural frequencies and damping of the pole pairs, in the stored order.
+    pub fn mode_summaries(&self) -> Vec<ModeSummary> {
+        self.pairs
+            .iter()
+            .map(|p| ModeSummary {
+                f_hz: p.f_hz(),
+                zeta: p.zeta(),
+            })
+            .collect()
+    }
+
+    /// True when every pole is in the open left half plane (the integrators of the
+    /// rigid-body part excepted).
+    pub fn is_stable(&self) -> bool {
+        self.pairs.iter().all(|p| p.pole.re < 0.0) && self.real_poles.iter().all(|p| p.pole < 0.0)
+    }
+
+    /// `vec(P(s))` at one complex point `s` into `out` (length `ny * nu`), column-major.
+    pub fn eval_s_into(&self, s: C64, out: &mut [C64]) {
+        let (ny, nu) = (self.ny, self.nu);
+        debug_assert_eq!(out.len(), ny * nu);
+        for j in 0..nu {
+            for i in 0..ny {
+                out[j * ny + i] = C64::new(self.feedthrough[(i, j)], 0.0);
+            }
+        }
+        if !self.rigid.is_empty() {
+            let inv_s = s.inv();
+            let mut pw = inv_s;
+            for r in &self.rigid {
+                for j in 0..nu {
+                    for i in 0..ny {
+                        out[j * ny + i] += pw * r[(i, j)];
+                    }
+                }
+                pw *= inv_s;
+            }
+        }
+        for p in &self.pairs {
+            let f1 = (s - p.pole).inv();
+            let f2 = (s - p.pole.conj()).inv();
+            for j in 0..nu {
+                for i in 0..ny {
+                    let r = p.residue[(i, j)];
+                    out[j * ny + i] += r * f1 + r.conj() * f2;
+                }
+            }
+        }
+        for p in &self.real_poles {
+            let f = (s - p.pole).inv();
+            for j in 0..nu {
+                for i in 0..ny {
+                    out[j * ny + i] += f * p.residue[(i, j)];
+                }
+            }
+        }
+    }
+
+    /// The continuous-time frequency response `P(j w)` at the angular frequencies
+    /// `omega` (rad/s). Fails at `w = 0` when the model has integrators.
+    pub fn freq_response(&self, omega: &[f64]) -> Result<ResponseGrid, RealizeError> {
+        let mut g = ResponseGrid::zeros(omega.len(), self.ny, self.nu);
+        for (k, &w) in omega.iter().enumerate() {
+            if w == 0.0 && !self.rigid.is_empty() {
+                return Err(RealizeError::AtPole { point: k, omega: w });
+            }
+            self.eval_s_into(C64::new(0.0, w), g.line_mut(k));
+        }
+        Ok(g)
+    }
+
+    /// The exact frequency response of this continuous model seen through a zero-order
+    /// hold sampler with sample time `ts` and an extra delay of `delay_samples` samples
+    /// (e.g. 1.0 for one sample of computation delay), evaluated at
+    /// `z = exp(j w ts)` for each `w` in `omega` (rad/s).
+    ///
+    /// Every term is discretized in closed form: `R/(s-p)` becomes
+    /// `R (e^{p ts} - 1)/p / (z - e^{p ts})`, and `R/s^k` becomes
+    /// `R ts^k/k! E_k(z)/(z-1)^k` with `E_k` the Eulerian polynomial (`E_2 = z + 1`), the
+    /// same transfer function that the augmented-matrix-exponential discretization gives.
+    pub fn zoh_response(
+        &self,
+        omega: &[f64],
+        ts: f64,
+        delay_samples: f64,
+    ) -> Result<ResponseGrid, RealizeError> {
+        if !(ts.is_finite() && ts > 0.0) {
+            return Err(RealizeError::InvalidParameter {
+                name: "ts".into(),
+                value: ts,
+                why: "the sample time must be finite and > 0".into(),
+            });
+        }
+        let (ny, nu) = (self.ny, self.nu);
+        let mut g = ResponseGrid::zeros(omega.len(), ny, nu);
+        // Per-term discrete gains, computed once.
+        let pair_terms: Vec<(C64, C64)> = self
+            .pairs
+            .iter()
+            .map(|p| zoh_first_order(p.pole, ts))
+            .collect();
+        let real_terms: Vec<(C64, C64)> = self
+            .real_poles
+            .iter()
+            .map(|p| zoh_first_order(C64::new(p.pole, 0.0), ts))
+            .collect();
+        let euler: Vec<Vec<f64>> = (1..=self.rigid.len()).map(eulerian_row).collect();
+        for (k, &w) in omega.iter().enumerate() {
+            let z = C64::from_polar(1.0, w * ts);
+            let out = g.line_mut(k);
+            for j in 0..nu {
+                for i in 0..ny {
+                    out[j * ny + i] = C64::new(self.feedthrough[(i, j)], 0.0);
+                }
+            }
+            if !self.rigid.is_empty() {
+                let zm1 = z - 1.0;
+                if zm1.norm() < 1e-300 {
+                    return Err(RealizeError::AtPole { point: k, omega: w });
+                }
+                let mut fact = 1.0;
+                for (order_m1, r) in self.rigid.iter().enumerate() {
+                    let kk = order_m1 + 1;
+                    fact *= kk as f64;
+                    // E_k(z) by Horner, highest power first.
+                    let mut e = C64::new(0.0, 0.0);
+                    for &c in &euler[order_m1] {
+                        e = e * z + c;
+                    }
+                    let gain = e * ts.powi(kk as i32) / fact / zm1.powi(kk as i32);
+                    for j in 0..nu {
+                        for i in 0..ny {
+                            out[j * ny + i] += gain * r[(i, j)];
+                        }
+                    }
+                }
+            }
+            for (p, &(num, zp)) in self.pairs.iter().zip(&pair_terms) {
+                let f1 = num / (z - zp);
+                let f2 = num.conj() / (z - zp.conj());
+                for j in 0..nu {
+                    for i in 0..ny {
+                        let r = p.residue[(i, j)];
+                        out[j * ny + i] += r * f1 + r.conj() * f2;
+                    }
+                }
+            }
+            for (p, &(num, zp)) in self.real_poles.iter().zip(&real_terms) {
+                let f = num / (z - zp);
+                for j in 0..nu {
+                    for i in 0..ny {
+                        out[j * ny + i] += f * p.residue[(i, j)];
+                    }
+                }
+            }
+            if delay_samples != 0.0 {
+                let d = C64::from_polar(1.0, -w * ts * delay_samples);
+                for v in out.iter_mut() {
+                    *v *= d;
+                }
+            }
+        }
+        Ok(g)
+    }
+}
+
+/// ZOH discretization of `1/(s - p)`: returns `((e^{p ts} - 1)/p, e^{p ts})` so that the
+/// discrete term is `num / (z - zp)`; the limit `p -> 0` gives `ts`.
+fn zoh_first_order(p: C64, ts: f64) -> (C64, C64) {
+    let zp = (p * ts).exp();
+    let x = p * ts;
+    // (e^x - 1)/x * ts, accurate for small |x| by its series.
+    let num = if x.norm() < 1e-5 {
+        ts * (C64::new(1.0, 0.0) + x / 2.0 + x * x / 6.0)
+    } else {
+        (zp - 1.0) / p
+    };
+    (num, zp)
+}
+
+/// Eulerian numbers `A(k, m)`, `m = 0..k-1`: the coefficients (highest power of `z`
+/// first) of the polynomial `E_k(z)` in `Z{zoh(1/s^k)} = ts^k/k! E_k(z) / (z-1)^k`.
+fn eulerian_row(k: usize) -> Vec<f64> {
+    let mut row = vec![1.0];
+    for n in 2..=k {
+        let mut next = vec![0.0; n];
+        for m in 0..n {
+            let a = if m >= 1 && m - 1 < row.len() {
+                (n - m) as f64 * row[m - 1]
+            } else {
+                0.0
+            };
+            let b = if m < row.len() {
+                (m + 1) as f64 * row[m]
+            } else {
+                0.0
+            };
+            next[m] = a + b;
+        }
+        row = next;
+    }
+    row
+}
+
+fn all_finite_real(m: &Mat<f64>) -> bool {
+    (0..m.ncols()).all(|j| (0..m.nrows()).all(|i| m[(i, j)].is_finite()))
+}
+
+fn all_finite_complex(m: &Mat<C64>) -> bool {
+    (0..m.ncols())
+        .all(|j| (0..m.nrows()).all(|i| m[(i, j)].re.is_finite() && m[(i, j)].im.is_finite()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn eulerian_rows() {
+        assert_eq!(eulerian_row(1), vec![1.0]);
+        assert_eq!(eulerian_row(2), vec![1.0, 1.0]);
+        assert_eq!(eulerian_row(3), vec![1.0, 4.0, 1.0]);
+        assert_eq!(eulerian_row(4), vec![1.0, 11.0, 11.0, 1.0]);
+    }
+
+    #[test]
+    fn double_integrator_zoh_closed_form() {
+        // zoh(1/s^2) = ts^2 (z+1) / (2 (z-1)^2)
+        let mut m = ModalModel::new(1, 1);
+        m.rigid = vec![Mat::zeros(1, 1), Mat::from_fn(1, 1, |_, _| 1.0)];
+        let ts = 1e-4;
+        let w = [100.0, 3000.0, 20000.0];
+        let g = m.zoh_response(&w, ts, 0.0).unwrap();
+        for (k, &wk) in w.iter().enumerate() {
+            let z = C64::from_polar(1.0, wk * ts);
+            let expect = (z + 1.0) * ts * ts / (2.0 * (z - 1.0) * (z - 1.0));
+            assert!((g.get(k, 0, 0) - expect).norm() < 1e-12 * expect.norm());
+        }
+    }
+}
