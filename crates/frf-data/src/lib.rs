@@ -17,6 +17,7 @@ pub mod estimator;
 pub mod frf;
 pub mod model;
 pub mod shared_data;
+pub mod truth;
 pub mod view;
 pub mod weighting;
 
