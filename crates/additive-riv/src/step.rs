@@ -1,0 +1,400 @@
+//! One step of Algorithm 1 (eq. 23 of the wafer-stage paper), in update form.
+//!
+//! With the pseudo-linear regression of Lemma 1 (eq. 13-15), the diagonal blocks that
+//! (23) extracts from `B^<j+1>` equal `beta^<j> + Delta` with
+//!
+//! `[sum_k Re{ Phi_hat W Phi^T }] Delta = sum_k Re{ Phi_hat W vec(E(beta^<j>)) }`,
+//!
+//! because each column `i` of `Upsilon^T` is `vec(E) + Phi_i^T theta_i` at the current
+//! parameters. The solve therefore only affects the step, never the fixed point, which
+//! is the first-order optimality condition (9) whatever the rounding in the solve.
+//!
+//! `Phi_hat` (the instrument, the gradient (11)-(12)) uses the submodel responses
+//! `P_i`; `Phi` (the regressor (14)) uses the residual plants `g~_i = E + P_i` (15).
+//! The SK variant (Remark 1) uses `Phi` in both places.
+//!
+//! **Structure.** The numerator columns of both matrices are `x^r/(pi A) I` (identity
+//! blocks: each numerator coefficient touches one entry of `vec(G)`) and the weighting is
+//! diagonal, so the normal matrix is block-arrow shaped: one `n_num x n_num` block per
+//! entry plus the shared denominator block. Each entry's numerator unknowns are
+//! eliminated (Schur complement onto the shared parameters), the shared system is solved,
+//! and the numerators follow by back-substitution. One step costs
+//! `O(lines * entries * (n_num + n_shared)^2)`: linear in lines and in `ny nu`.
+
+use crate::problem::{Basis, FitData, Layout};
+use crate::small::{lu_solve, spd_solve};
+use crate::RivError;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
+use frf_data::C64;
+use rayon::prelude::*;
+
+/// Which matrix multiplies the residual: the refined instrument (eq. 12) or the
+/// regressor itself (SK iterations, Remark 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum IvMethod {
+    /// Refined instrumental variables: instrument `Phi_hat` (eq. 12). The fixed point is
+    /// a stationary point of the weighted criterion (8).
+    #[default]
+    Riv,
+    /// Sanathanan-Koerner: `Phi` in place of `Phi_hat`; cheaper to converge from far
+    /// away, but its fixed point is biased by noise.
+    Sk,
+}
+
+/// How the linear system of a step is solved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StepSolver {
+    /// Per-entry elimination of the numerators (the default; linear cost).
+    #[default]
+    Structured,
+    /// The full square system formed and solved densely (reference for small problems).
+    Dense,
+}
+
+/// The update of one step.
+#[derive(Debug, Clone)]
+pub struct StepUpdate {
+    /// Change of the shared parameters (denominators, then the delay).
+    pub d_shared: Vec<f64>,
+    /// Change of the numerators, `eta` layout.
+    pub d_eta: Vec<f64>,
+    /// Condition estimate of the shared (Schur) system.
+    pub cond_shared: f64,
+    /// Worst condition estimate of the per-entry numerator blocks.
+    pub cond_numerator: f64,
+}
+
+/// Fills the real instrument `Y = [U | V_hat]` and regressor `X = [U | V | eps]` of entry
+/// `e`, rows `k` (real parts) and `n + k` (imaginary parts), all scaled by `sqrt(w)`.
+/// Returns nothing; `y` and `x` must be `2n x (nn + ns)` and `2n x (nn + ns + 1)`.
+#[allow(clippy::too_many_arguments)]
+fn fill_entry(
+    e: usize,
+    data: &FitData,
+    lay: &Layout,
+    sub_den: &[(usize, usize, usize, usize)],
+    basis: &Basis,
+    eta: &[f64],
+    method: IvMethod,
+    y: &mut Mat<f64>,
+    x: &mut Mat<f64>,
+    psub: &mut Vec<C64>,
+) {
+    let n = data.n;
+    let m = data.m();
+    let nn = lay.n_num;
+    let nd = lay.n_den;
+    let ns = lay.n_shared();
+    let be = &eta[e * nn..(e + 1) * nn];
+    let n_sub = sub_den.len();
+    for k in 0..n {
+        let sw = (data.w[k * m + e]).sqrt() * basis.f[k].norm();
+        let uk = &basis.u[k * nn..(k + 1) * nn];
+        // submodel responses P_i and the total
+        psub.clear();
+        let mut p = C64::new(0.0, 0.0);
+        for &(num_off, n_num, _, _) in sub_den {
+            let mut pi = C64::new(0.0, 0.0);
+            for j in num_off..num_off + n_num {
+                pi += uk[j] * be[j];
+            }
+            psub.push(pi);
+            p += pi;
+        }
+        let fk = basis.f[k];
+        // data divided by the known factor; residual of the divided problem
+        let yk = if sw > 0.0 {
+            data.g[k * m + e] / fk
+        } else {
+            C64::new(0.0, 0.0)
+        };
+        let err = yk - p;
+        // numerator columns
+        for (j, &ukj) in uk.iter().enumerate() {
+            let v = ukj * sw;
+            y[(k, j)] = v.re;
+            y[(n + k, j)] = v.im;
+            x[(k, j)] = v.re;
+            x[(n + k, j)] = v.im;
+        }
+        // denominator columns: dcol * P_i (instrument) and dcol * (E + P_i) (regressor)
+        let dk = &basis.dcol[k * nd..(k + 1) * nd];
+        for (si, &(_, _, den_off, n_den)) in sub_den.iter().enumerate().take(n_sub) {
+            let pi = psub[si];
+            let gi = err + pi;
+            for d in den_off..den_off + n_den {
+                let inst = dk[d] * if method == IvMethod::Riv { pi } else { gi } * sw;
+                let reg = dk[d] * gi * sw;
+                y[(k, nn + d)] = inst.re;
+                y[(n + k, nn + d)] = inst.im;
+                x[(k, nn + d)] = reg.re;
+                x[(n + k, nn + d)] = reg.im;
+            }
+        }
+        if lay.fit_delay {
+            // d(G/F - P)/d tau = j w G/F: regressor -j w y, instrument -j w P
+            let jw = C64::new(0.0, data.omega[k]);
+            let inst = -jw * if method == IvMethod::Riv { p } else { yk } * sw;
+            let reg = -jw * yk * sw;
+            y[(k, nn + nd)] = inst.re;
+            y[(n + k, nn + nd)] = inst.im;
+            x[(k, nn + nd)] = reg.re;
+            x[(n + k, nn + nd)] = reg.im;
+        }
+        let ev = err * sw;
+        x[(k, nn + ns)] = ev.re;
+        x[(n + k, nn + ns)] = ev.im;
+    }
+}
+
+fn submodel_table(
+    lay: &Layout,
+    model_subs: &[(usize, usize)],
+) -> Vec<(usize, usize, usize, usize)> {
+    model_subs
+        .iter()
+        .enumerate()
+        .map(|(i, &(n_num, n_den))| (lay.num_offset[i], n_num, lay.den_offset[i], n_den))
+        .collect()
+}
+
+/// Per-entry result of the elimination.
+struct EntryParts {
+    /// `K_e = H_nn^{-1} H_ns`, column-major `nn x ns`.
+    k_mat: Vec<f64>,
+    /// `k_e = H_nn^{-1} g_n`.
+    k_vec: Vec<f64>,
+    /// `H_ss - H_sn K_e`, column-major `ns x ns`.
+    s_mat: Vec<f64>,
+    /// `g_s - H_sn k_e`.
+    r_vec: Vec<f64>,
+    cond: f64,
+}
+
+/// Computes the update of one step of Algorithm 1.
+///
+/// `subs` lists `(numerator count, denominator count)` per submodel.
+pub fn step(
+    data: &FitData,
+    lay: &Layout,
+    subs: &[(usize, usize)],
+    basis: &Basis,
+    eta: &[f64],
+    method: IvMethod,
+    solver: StepSolver,
+    parallel: bool,
+) -> Result<StepUpdate, RivError> {
+    match solver {
+        StepSolver::Structured => step_structured(data, lay, subs, basis, eta, method, parallel),
+        StepSolver::Dense => step_dense(data, lay, subs, basis, eta, method),
+    }
+}
+
+fn step_structured(
+    data: &FitData,
+    lay: &Layout,
+    subs: &[(usize, usize)],
+    basis: &Basis,
+    eta: &[f64],
+    method: IvMethod,
+    parallel: bool,
+) -> Result<StepUpdate, RivError> {
+    let n = data.n;
+    let m = data.m();
+    let nn = lay.n_num;
+    let ns = lay.n_shared();
+    let table = submodel_table(lay, subs);
+    let per_entry = |e: usize,
+                     bufs: &mut (Mat<f64>, Mat<f64>, Mat<f64>, Vec<C64>)|
+     -> Result<EntryParts, RivError> {
+        let (y, x, z, psub) = bufs;
+        fill_entry(e, data, lay, &table, basis, eta, method, y, x, psub);
+        // Z = Y^T X : (nn + ns) x (nn + ns + 1)
+        matmul(
+            z.as_mut(),
+            Accum::Replace,
+            y.transpose(),
+            x.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        let mut h_nn = vec![0.0; nn * nn];
+        for j in 0..nn {
+            for i in 0..nn {
+                // symmetric: average the two triangles against rounding
+                h_nn[j * nn + i] = 0.5 * (z[(i, j)] + z[(j, i)]);
+            }
+        }
+        // rhs: [H_ns | g_n]
+        let mut rhs = vec![0.0; nn * (ns + 1)];
+        for c in 0..=ns {
+            for i in 0..nn {
+                rhs[c * nn + i] = z[(i, nn + c)];
+            }
+        }
+        let cond =
+            spd_solve(&mut h_nn, nn, &mut rhs, ns + 1).ok_or_else(|| RivError::Numerical {
+                what: format!(
+                    "numerator block of entry G{}_{}",
+                    e % data.ny + 1,
+                    e / data.ny + 1
+                ),
+                why: "the numerator basis functions are linearly dependent over the weighted \
+                  lines (two submodels with the same poles, or a mode with no weighted \
+                  line near it); remove duplicate modes or widen the band"
+                    .into(),
+            })?;
+        // S_e = H_ss - H_sn K ; r_e = g_s - H_sn k
+        let mut s_mat = vec![0.0; ns * ns];
+        let mut r_vec = vec![0.0; ns];
+        for c in 0..ns {
+            for r in 0..ns {
+                let mut v = z[(nn + r, nn + c)];
+                for t in 0..nn {
+                    v -= z[(nn + r, t)] * rhs[c * nn + t];
+                }
+                s_mat[c * ns + r] = v;
+            }
+        }
+        for r in 0..ns {
+            let mut v = z[(nn + r, nn + ns)];
+            for t in 0..nn {
+                v -= z[(nn + r, t)] * rhs[ns * nn + t];
+            }
+            r_vec[r] = v;
+        }
+        let k_vec = rhs[ns * nn..].to_vec();
+        rhs.truncate(ns * nn);
+        Ok(EntryParts {
+            k_mat: rhs,
+            k_vec,
+            s_mat,
+            r_vec,
+            cond,
+        })
+    };
+    let init = || {
+        (
+            Mat::<f64>::zeros(2 * n, nn + ns),
+            Mat::<f64>::zeros(2 * n, nn + ns + 1),
+            Mat::<f64>::zeros(nn + ns, nn + ns + 1),
+            Vec::with_capacity(subs.len()),
+        )
+    };
+    let parts: Vec<EntryParts> = if parallel && m > 1 {
+        (0..m)
+            .into_par_iter()
+            .map_init(init, |b, e| per_entry(e, b))
+            .collect::<Result<_, _>>()?
+    } else {
+        let mut b = init();
+        (0..m)
+            .map(|e| per_entry(e, &mut b))
+            .collect::<Result<_, _>>()?
+    };
+    let mut s = Mat::<f64>::zeros(ns, ns);
+    let mut r = vec![0.0; ns];
+    let mut cond_num = 1.0f64;
+    for p in &parts {
+        for c in 0..ns {
+            for rr in 0..ns {
+                s[(rr, c)] += p.s_mat[c * ns + rr];
+            }
+        }
+        for (ri, v) in r.iter_mut().zip(&p.r_vec) {
+            *ri += v;
+        }
+        cond_num = cond_num.max(p.cond);
+    }
+    let (d_shared, cond_shared) = if ns == 0 {
+        (Vec::new(), 1.0)
+    } else {
+        lu_solve(&s, &r).ok_or_else(|| RivError::Numerical {
+            what: "shared denominator system (Schur complement)".into(),
+            why: "singular: a mode has no weighted data near it, or two modes coincide; \
+                  drop modes outside the band or duplicates"
+                .into(),
+        })?
+    };
+    let mut d_eta = vec![0.0; m * nn];
+    for (e, p) in parts.iter().enumerate() {
+        for t in 0..nn {
+            let mut v = p.k_vec[t];
+            for c in 0..ns {
+                v -= p.k_mat[c * nn + t] * d_shared[c];
+            }
+            d_eta[e * nn + t] = v;
+        }
+    }
+    Ok(StepUpdate {
+        d_shared,
+        d_eta,
+        cond_shared,
+        cond_numerator: cond_num,
+    })
+}
+
+/// The dense reference: forms the full `(ns + m nn)` square system from the same
+/// columns (entries stacked), and solves it by an equilibrated LU. For small problems
+/// and tests only: its cost grows with the square of `m nn`.
+fn step_dense(
+    data: &FitData,
+    lay: &Layout,
+    subs: &[(usize, usize)],
+    basis: &Basis,
+    eta: &[f64],
+    method: IvMethod,
+) -> Result<StepUpdate, RivError> {
+    let n = data.n;
+    let m = data.m();
+    let nn = lay.n_num;
+    let ns = lay.n_shared();
+    let ptot = ns + m * nn;
+    let table = submodel_table(lay, subs);
+    // Full instrument and regressor: rows 2n per entry, columns [shared | eta_0 | ..].
+    let mut yf = Mat::<f64>::zeros(2 * n * m, ptot);
+    let mut xf = Mat::<f64>::zeros(2 * n * m, ptot + 1);
+    let mut y = Mat::<f64>::zeros(2 * n, nn + ns);
+    let mut x = Mat::<f64>::zeros(2 * n, nn + ns + 1);
+    let mut psub = Vec::new();
+    for e in 0..m {
+        fill_entry(
+            e, data, lay, &table, basis, eta, method, &mut y, &mut x, &mut psub,
+        );
+        for row in 0..2 * n {
+            let rr = e * 2 * n + row;
+            for c in 0..ns {
+                yf[(rr, c)] = y[(row, nn + c)];
+                xf[(rr, c)] = x[(row, nn + c)];
+            }
+            for t in 0..nn {
+                yf[(rr, ns + e * nn + t)] = y[(row, t)];
+                xf[(rr, ns + e * nn + t)] = x[(row, t)];
+            }
+            xf[(rr, ptot)] = x[(row, nn + ns)];
+        }
+    }
+    let mut z = Mat::<f64>::zeros(ptot, ptot + 1);
+    matmul(
+        z.as_mut(),
+        Accum::Replace,
+        yf.transpose(),
+        xf.as_ref(),
+        1.0,
+        Par::Seq,
+    );
+    let a = Mat::from_fn(ptot, ptot, |i, j| z[(i, j)]);
+    let b: Vec<f64> = (0..ptot).map(|i| z[(i, ptot)]).collect();
+    let (sol, cond) = lu_solve(&a, &b).ok_or_else(|| RivError::Numerical {
+        what: "dense step system".into(),
+        why: "singular".into(),
+    })?;
+    Ok(StepUpdate {
+        d_shared: sol[..ns].to_vec(),
+        d_eta: sol[ns..].to_vec(),
+        cond_shared: cond,
+        cond_numerator: cond,
+    })
+}
