@@ -18,6 +18,7 @@
 //!   insignificant ones, so that a plain fit holds every mode the data show.
 
 pub mod error;
+pub mod init;
 pub mod model;
 
 pub use error::RivError;
@@ -28,6 +29,7 @@ pub mod riv;
 pub mod small;
 pub mod step;
 
+pub use init::{initial_model, InitConfig, RigidBody};
 pub use numerators::fit_numerators;
 pub use problem::FitData;
 pub use riv::{AdditiveRiv, RivConfig};

@@ -1,11 +1,14 @@
 //! The convex numerator problem (24)-(25) of the wafer-stage paper: with the
 //! denominators fixed, each entry of `vec(G)` is a linear least-squares problem in its own
-//! numerator coefficients, solved by QR (faer) entry by entry.
+//! numerator coefficients, solved entry by entry.
 
 use crate::problem::{pack, unpack, Basis, FitData, Layout};
+use crate::small::spd_solve;
 use crate::{AdditiveModel, RivError};
+use faer::linalg::matmul::matmul;
 use faer::linalg::solvers::SolveLstsq;
-use faer::Mat;
+use faer::{Accum, Mat, Par};
+use frf_data::C64;
 use rayon::prelude::*;
 
 /// Fits every numerator of `model` to `data` with the denominators held fixed
@@ -28,35 +31,70 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
         });
     }
     let basis = Basis::new(model, &lay, &data.omega);
+    // Normal equations per entry, formed by one GEMM on the transposed (line-contiguous)
+    // regressor and solved by an equilibrated Cholesky: the structure is exploited on
+    // purpose (the basis is shared by all entries). When the equilibrated system is
+    // ill-conditioned (> 1e10) the entry falls back to a QR of the regressor itself.
     let solve_entry = |e: usize| -> Result<Vec<f64>, RivError> {
-        let mut a = Mat::<f64>::zeros(2 * n, nn);
-        let mut b = Mat::<f64>::zeros(2 * n, 1);
-        let mut colscale = vec![0.0f64; nn];
+        let sw: Vec<C64> = (0..n)
+            .map(|k| basis.f[k] * data.w[k * m + e].sqrt())
+            .collect();
+        let mut ut = Mat::<f64>::zeros(nn + 1, 2 * n);
         for k in 0..n {
-            let sw = data.w[k * m + e].sqrt();
-            let fk = basis.f[k];
-            for j in 0..nn {
-                let v = basis.u[k * nn + j] * fk * sw;
-                a[(k, j)] = v.re;
-                a[(n + k, j)] = v.im;
-                colscale[j] = colscale[j].max(v.norm());
+            let g = data.g[k * m + e] * data.w[k * m + e].sqrt();
+            {
+                let c = ut.col_as_slice_mut(k);
+                for j in 0..nn {
+                    c[j] = (basis.u[k * nn + j] * sw[k]).re;
+                }
+                c[nn] = g.re;
             }
-            let g = data.g[k * m + e] * sw;
-            b[(k, 0)] = g.re;
-            b[(n + k, 0)] = g.im;
+            let c = ut.col_as_slice_mut(n + k);
+            for j in 0..nn {
+                c[j] = (basis.u[k * nn + j] * sw[k]).im;
+            }
+            c[nn] = g.im;
         }
-        for (j, c) in colscale.iter_mut().enumerate() {
-            if *c == 0.0 {
+        let mut z = Mat::<f64>::zeros(nn + 1, nn + 1);
+        matmul(
+            z.as_mut(),
+            Accum::Replace,
+            ut.as_ref(),
+            ut.transpose(),
+            1.0,
+            Par::Seq,
+        );
+        let mut h = vec![0.0; nn * nn];
+        let mut rhs = vec![0.0; nn];
+        for j in 0..nn {
+            for i in 0..nn {
+                h[j * nn + i] = z[(i, j)];
+            }
+            rhs[j] = z[(j, nn)];
+        }
+        if let Some(c) = spd_solve(&mut h, nn, &mut rhs, 1) {
+            if c < 1e10 && rhs.iter().all(|v| v.is_finite()) {
+                return Ok(rhs);
+            }
+        }
+        // QR fallback on the regressor (column-major copy of the transpose).
+        let mut colscale = vec![0.0f64; nn];
+        let mut a = Mat::<f64>::zeros(2 * n, nn);
+        for (j, cs) in colscale.iter_mut().enumerate() {
+            let mx = (0..2 * n).fold(0.0f64, |acc, r| acc.max(ut[(j, r)].abs()));
+            if mx == 0.0 {
                 return Err(RivError::Numerical {
                     what: "numerator least squares".into(),
                     why: format!("basis function {j} is zero on every weighted line"),
                 });
             }
-            *c = 1.0 / *c;
-            for r in 0..2 * n {
-                a[(r, j)] *= *c;
+            *cs = 1.0 / mx;
+            let col = a.col_as_slice_mut(j);
+            for (r, v) in col.iter_mut().enumerate() {
+                *v = ut[(j, r)] * *cs;
             }
         }
+        let b = Mat::from_fn(2 * n, 1, |r, _| ut[(nn, r)]);
         let x = a.qr().solve_lstsq(&b);
         let sol: Vec<f64> = (0..nn).map(|j| x[(j, 0)] * colscale[j]).collect();
         if sol.iter().any(|v| !v.is_finite()) {

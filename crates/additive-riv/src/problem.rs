@@ -196,6 +196,10 @@ pub struct Basis {
     pub dcol: Vec<C64>,
     /// Known factor `F_k`.
     pub f: Vec<C64>,
+    /// `|F_k|`.
+    pub f_abs: Vec<f64>,
+    /// `1 / F_k`.
+    pub f_inv: Vec<C64>,
 }
 
 impl Basis {
@@ -224,7 +228,15 @@ impl Basis {
             }
             f.push(model.factor.at(w));
         }
-        Self { u, dcol, f }
+        let f_abs = f.iter().map(|z| z.norm()).collect();
+        let f_inv = f.iter().map(|z| z.inv()).collect();
+        Self {
+            u,
+            dcol,
+            f,
+            f_abs,
+            f_inv,
+        }
     }
 }
 

@@ -66,9 +66,11 @@ pub struct StepUpdate {
     pub cond_numerator: f64,
 }
 
-/// Fills the real instrument `Y = [U | V_hat]` and regressor `X = [U | V | eps]` of entry
-/// `e`, rows `k` (real parts) and `n + k` (imaginary parts), all scaled by `sqrt(w)`.
-/// Returns nothing; `y` and `x` must be `2n x (nn + ns)` and `2n x (nn + ns + 1)`.
+/// Fills the transposed real instrument `Yt = [U | V_hat]^T` and regressor
+/// `Xt = [U | V | eps]^T` of entry `e`: column `k` holds the real parts of line `k`,
+/// column `n + k` the imaginary parts, all scaled by `sqrt(w)`. Storing the transposes
+/// keeps every write of a line contiguous. `yt` and `xt` must be `(nn + ns) x 2n` and
+/// `(nn + ns + 1) x 2n`.
 #[allow(clippy::too_many_arguments)]
 fn fill_entry(
     e: usize,
@@ -78,8 +80,8 @@ fn fill_entry(
     basis: &Basis,
     eta: &[f64],
     method: IvMethod,
-    y: &mut Mat<f64>,
-    x: &mut Mat<f64>,
+    yt: &mut Mat<f64>,
+    xt: &mut Mat<f64>,
     psub: &mut Vec<C64>,
 ) {
     let n = data.n;
@@ -88,9 +90,10 @@ fn fill_entry(
     let nd = lay.n_den;
     let ns = lay.n_shared();
     let be = &eta[e * nn..(e + 1) * nn];
-    let n_sub = sub_den.len();
+    let mut col_re = vec![C64::new(0.0, 0.0); nn + ns + 1];
+    let mut inst = vec![C64::new(0.0, 0.0); nn + ns];
     for k in 0..n {
-        let sw = (data.w[k * m + e]).sqrt() * basis.f[k].norm();
+        let sw = (data.w[k * m + e]).sqrt() * basis.f_abs[k];
         let uk = &basis.u[k * nn..(k + 1) * nn];
         // submodel responses P_i and the total
         psub.clear();
@@ -103,49 +106,57 @@ fn fill_entry(
             psub.push(pi);
             p += pi;
         }
-        let fk = basis.f[k];
         // data divided by the known factor; residual of the divided problem
-        let yk = if sw > 0.0 {
-            data.g[k * m + e] / fk
-        } else {
-            C64::new(0.0, 0.0)
-        };
+        let yk = data.g[k * m + e] * basis.f_inv[k];
         let err = yk - p;
-        // numerator columns
+        // numerator columns (instrument = regressor)
         for (j, &ukj) in uk.iter().enumerate() {
             let v = ukj * sw;
-            y[(k, j)] = v.re;
-            y[(n + k, j)] = v.im;
-            x[(k, j)] = v.re;
-            x[(n + k, j)] = v.im;
+            col_re[j] = v;
+            inst[j] = v;
         }
         // denominator columns: dcol * P_i (instrument) and dcol * (E + P_i) (regressor)
         let dk = &basis.dcol[k * nd..(k + 1) * nd];
-        for (si, &(_, _, den_off, n_den)) in sub_den.iter().enumerate().take(n_sub) {
-            let pi = psub[si];
-            let gi = err + pi;
+        for (si, &(_, _, den_off, n_den)) in sub_den.iter().enumerate() {
+            let pi = psub[si] * sw;
+            let gi = (err + psub[si]) * sw;
+            let ip = if method == IvMethod::Riv { pi } else { gi };
             for d in den_off..den_off + n_den {
-                let inst = dk[d] * if method == IvMethod::Riv { pi } else { gi } * sw;
-                let reg = dk[d] * gi * sw;
-                y[(k, nn + d)] = inst.re;
-                y[(n + k, nn + d)] = inst.im;
-                x[(k, nn + d)] = reg.re;
-                x[(n + k, nn + d)] = reg.im;
+                inst[nn + d] = dk[d] * ip;
+                col_re[nn + d] = dk[d] * gi;
             }
         }
         if lay.fit_delay {
             // d(G/F - P)/d tau = j w G/F: regressor -j w y, instrument -j w P
-            let jw = C64::new(0.0, data.omega[k]);
-            let inst = -jw * if method == IvMethod::Riv { p } else { yk } * sw;
-            let reg = -jw * yk * sw;
-            y[(k, nn + nd)] = inst.re;
-            y[(n + k, nn + nd)] = inst.im;
-            x[(k, nn + nd)] = reg.re;
-            x[(n + k, nn + nd)] = reg.im;
+            let jw = C64::new(0.0, data.omega[k]) * sw;
+            inst[nn + nd] = -jw * if method == IvMethod::Riv { p } else { yk };
+            col_re[nn + nd] = -jw * yk;
         }
-        let ev = err * sw;
-        x[(k, nn + ns)] = ev.re;
-        x[(n + k, nn + ns)] = ev.im;
+        col_re[nn + ns] = err * sw;
+        {
+            let c = yt.col_as_slice_mut(k);
+            for (dst, v) in c.iter_mut().zip(&inst) {
+                *dst = v.re;
+            }
+        }
+        {
+            let c = yt.col_as_slice_mut(n + k);
+            for (dst, v) in c.iter_mut().zip(&inst) {
+                *dst = v.im;
+            }
+        }
+        {
+            let c = xt.col_as_slice_mut(k);
+            for (dst, v) in c.iter_mut().zip(&col_re) {
+                *dst = v.re;
+            }
+        }
+        {
+            let c = xt.col_as_slice_mut(n + k);
+            for (dst, v) in c.iter_mut().zip(&col_re) {
+                *dst = v.im;
+            }
+        }
     }
 }
 
@@ -209,14 +220,14 @@ fn step_structured(
     let per_entry = |e: usize,
                      bufs: &mut (Mat<f64>, Mat<f64>, Mat<f64>, Vec<C64>)|
      -> Result<EntryParts, RivError> {
-        let (y, x, z, psub) = bufs;
-        fill_entry(e, data, lay, &table, basis, eta, method, y, x, psub);
-        // Z = Y^T X : (nn + ns) x (nn + ns + 1)
+        let (yt, xt, z, psub) = bufs;
+        fill_entry(e, data, lay, &table, basis, eta, method, yt, xt, psub);
+        // Z = Y^T X = Yt Xt^T : (nn + ns) x (nn + ns + 1)
         matmul(
             z.as_mut(),
             Accum::Replace,
-            y.transpose(),
-            x.as_ref(),
+            yt.as_ref(),
+            xt.transpose(),
             1.0,
             Par::Seq,
         );
@@ -277,8 +288,8 @@ fn step_structured(
     };
     let init = || {
         (
-            Mat::<f64>::zeros(2 * n, nn + ns),
-            Mat::<f64>::zeros(2 * n, nn + ns + 1),
+            Mat::<f64>::zeros(nn + ns, 2 * n),
+            Mat::<f64>::zeros(nn + ns + 1, 2 * n),
             Mat::<f64>::zeros(nn + ns, nn + ns + 1),
             Vec::with_capacity(subs.len()),
         )
@@ -356,24 +367,24 @@ fn step_dense(
     // Full instrument and regressor: rows 2n per entry, columns [shared | eta_0 | ..].
     let mut yf = Mat::<f64>::zeros(2 * n * m, ptot);
     let mut xf = Mat::<f64>::zeros(2 * n * m, ptot + 1);
-    let mut y = Mat::<f64>::zeros(2 * n, nn + ns);
-    let mut x = Mat::<f64>::zeros(2 * n, nn + ns + 1);
+    let mut yt = Mat::<f64>::zeros(nn + ns, 2 * n);
+    let mut xt = Mat::<f64>::zeros(nn + ns + 1, 2 * n);
     let mut psub = Vec::new();
     for e in 0..m {
         fill_entry(
-            e, data, lay, &table, basis, eta, method, &mut y, &mut x, &mut psub,
+            e, data, lay, &table, basis, eta, method, &mut yt, &mut xt, &mut psub,
         );
         for row in 0..2 * n {
             let rr = e * 2 * n + row;
             for c in 0..ns {
-                yf[(rr, c)] = y[(row, nn + c)];
-                xf[(rr, c)] = x[(row, nn + c)];
+                yf[(rr, c)] = yt[(nn + c, row)];
+                xf[(rr, c)] = xt[(nn + c, row)];
             }
             for t in 0..nn {
-                yf[(rr, ns + e * nn + t)] = y[(row, t)];
-                xf[(rr, ns + e * nn + t)] = x[(row, t)];
+                yf[(rr, ns + e * nn + t)] = yt[(t, row)];
+                xf[(rr, ns + e * nn + t)] = xt[(t, row)];
             }
-            xf[(rr, ptot)] = x[(row, nn + ns)];
+            xf[(rr, ptot)] = xt[(nn + ns, row)];
         }
     }
     let mut z = Mat::<f64>::zeros(ptot, ptot + 1);
