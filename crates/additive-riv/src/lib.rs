@@ -26,6 +26,8 @@ pub use model::{AdditiveModel, Domain, KnownFactor, ModeInfo, Submodel, Submodel
 pub mod numerators;
 pub mod problem;
 pub mod riv;
+pub mod significance;
+pub mod structure;
 pub mod small;
 pub mod step;
 
@@ -34,3 +36,4 @@ pub use numerators::fit_numerators;
 pub use problem::FitData;
 pub use riv::{AdditiveRiv, RivConfig};
 pub use step::{IvMethod, StepSolver};
+pub use structure::{adapt_modes, AdaptConfig, AdaptReport};

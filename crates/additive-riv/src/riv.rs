@@ -18,9 +18,9 @@ pub struct RivConfig {
     pub weighting: Weighting,
     /// Iteration limit. Default: 50.
     pub max_iterations: usize,
-    /// Stop when the relative parameter change of a step is below this. Default: 1e-10.
+    /// Stop when the relative parameter change of a step is below this. Default: 1e-9.
     pub param_tol: f64,
-    /// Stop when the relative cost change stays below this for two steps. Default: 1e-12.
+    /// Stop when the relative cost change stays below this for two steps. Default: 1e-10.
     pub cost_tol: f64,
     /// Halve a step (up to 12 times) when it raises the cost; the fixed point is the same
     /// as without. Default: true.
@@ -39,8 +39,8 @@ impl Default for RivConfig {
             method: IvMethod::Riv,
             weighting: Weighting::Auto,
             max_iterations: 50,
-            param_tol: 1e-10,
-            cost_tol: 1e-12,
+            param_tol: 1e-9,
+            cost_tol: 1e-10,
             backtracking: true,
             solver: StepSolver::Structured,
             parallel: true,
@@ -170,7 +170,7 @@ pub fn iterate(
     let mut non_descent = 0;
     for it in 1..=cfg.max_iterations {
         iterations = it;
-        let upd = step(
+        let upd = match step(
             data,
             &lay,
             &subs,
@@ -179,7 +179,16 @@ pub fn iterate(
             cfg.method,
             cfg.solver,
             cfg.parallel,
-        )?;
+        ) {
+            Ok(u) => u,
+            Err(RivError::Numerical { what, why }) => {
+                convergence = Convergence::Failed {
+                    reason: format!("iteration {it}: {what}: {why}"),
+                };
+                break;
+            }
+            Err(e) => return Err(e),
+        };
         worst_cond = worst_cond.max(upd.cond_shared);
         let mut alpha = 1.0;
         let mut accepted = None;

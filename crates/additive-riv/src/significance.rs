@@ -1,0 +1,182 @@
+//! Statistics for deciding the model structure: the significance of each submodel
+//! (a Wald test on its numerators) and of a residual peak, with F and chi-square
+//! thresholds that account for the number of parameters, so that noise is not
+//! "explained" by extra modes.
+//!
+//! Units: with the weighted criterion `V = sum w |E|^2` and weights equal to the inverse
+//! variance, each complex residual contributes on average 1 to `V`, and each fitted real
+//! parameter removes on average 1/2. With other weightings the same holds up to an
+//! unknown scale `s^2`, estimated as `V / (N m - P / 2)`.
+
+use crate::problem::{pack, Basis, FitData, Layout};
+use crate::small::spd_solve;
+use crate::{AdditiveModel, RivError};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
+use frf_data::C64;
+use rayon::prelude::*;
+
+/// Standard normal quantile (Acklam's rational approximation, relative error < 1.2e-9).
+pub fn normal_quantile(p: f64) -> f64 {
+    let p = p.clamp(1e-300, 1.0 - 1e-16);
+    const A: [f64; 6] = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.383577518672690e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549671035763305,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
+    let plow = 0.02425;
+    if p < plow {
+        let q = (-2.0 * p.ln()).sqrt();
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    } else if p <= 1.0 - plow {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    } else {
+        -normal_quantile(1.0 - p)
+    }
+}
+
+/// Upper quantile of the chi-square distribution with `dof` degrees of freedom at tail
+/// probability `alpha` (Wilson-Hilferty approximation).
+pub fn chi2_upper(dof: f64, alpha: f64) -> f64 {
+    let z = normal_quantile(1.0 - alpha);
+    let h = 2.0 / (9.0 * dof);
+    dof * (1.0 - h + z * h.sqrt()).powi(3).max(0.0)
+}
+
+/// Noise scale `s^2 = V / (N m - P/2)` of a fit with cost `v = sum w |E|^2` (unit when the
+/// weights are the inverse variances and the model is adequate).
+pub fn noise_scale(v: f64, data: &FitData, n_params: usize) -> f64 {
+    let dof = (data.observations() as f64 / 2.0 - n_params as f64 / 2.0).max(1.0);
+    v / dof
+}
+
+/// Per submodel, the increase of the cost `sum w |E|^2` when its numerators are removed
+/// and the other numerators refitted with all denominators held fixed (a Wald statistic,
+/// exact for the linear numerator problem (24)).
+pub fn submodel_cost_increase(model: &AdditiveModel, data: &FitData) -> Result<Vec<f64>, RivError> {
+    let lay = Layout::of(model);
+    let nn = lay.n_num;
+    let n = data.n;
+    let m = data.m();
+    let basis = Basis::new(model, &lay, &data.omega);
+    let (_, eta) = pack(model, &lay);
+    let groups: Vec<(usize, usize)> = model
+        .submodels
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (lay.num_offset[i], s.num.len()))
+        .collect();
+    let per_entry = |e: usize| -> Result<Vec<f64>, RivError> {
+        let mut ut = Mat::<f64>::zeros(nn, 2 * n);
+        for k in 0..n {
+            let sw: C64 = basis.f[k] * data.w[k * m + e].sqrt();
+            {
+                let c = ut.col_as_slice_mut(k);
+                for j in 0..nn {
+                    c[j] = (basis.u[k * nn + j] * sw).re;
+                }
+            }
+            let c = ut.col_as_slice_mut(n + k);
+            for j in 0..nn {
+                c[j] = (basis.u[k * nn + j] * sw).im;
+            }
+        }
+        let mut z = Mat::<f64>::zeros(nn, nn);
+        matmul(z.as_mut(), Accum::Replace, ut.as_ref(), ut.transpose(), 1.0, Par::Seq);
+        let mut h = vec![0.0; nn * nn];
+        for j in 0..nn {
+            for i in 0..nn {
+                h[j * nn + i] = z[(i, j)];
+            }
+        }
+        let mut inv = vec![0.0; nn * nn];
+        for j in 0..nn {
+            inv[j * nn + j] = 1.0;
+        }
+        spd_solve(&mut h, nn, &mut inv, nn).ok_or_else(|| RivError::Numerical {
+            what: "submodel significance".into(),
+            why: "dependent numerator basis functions (duplicate modes)".into(),
+        })?;
+        let be = &eta[e * nn..(e + 1) * nn];
+        let mut out = Vec::with_capacity(groups.len());
+        for &(off, len) in &groups {
+            // eta_I^T [ (H^-1)_II ]^-1 eta_I
+            let mut blk = vec![0.0; len * len];
+            for c in 0..len {
+                for r in 0..len {
+                    blk[c * len + r] = inv[(off + c) * nn + off + r];
+                }
+            }
+            let mut x: Vec<f64> = be[off..off + len].to_vec();
+            let val = match spd_solve(&mut blk, len, &mut x, 1) {
+                Some(_) => be[off..off + len].iter().zip(&x).map(|(a, b)| a * b).sum(),
+                None => f64::INFINITY,
+            };
+            out.push(val);
+        }
+        Ok(out)
+    };
+    let per: Vec<Vec<f64>> = (0..m).into_par_iter().map(per_entry).collect::<Result<_, _>>()?;
+    let mut total = vec![0.0; groups.len()];
+    for v in &per {
+        for (t, x) in total.iter_mut().zip(v) {
+            *t += x;
+        }
+    }
+    Ok(total)
+}
+
+/// The F statistic of adding (or keeping) a group of `p` real parameters that lowers the
+/// cost by `dv`, relative to the noise scale `s2`: `(dv / (p/2)) / s2`.
+pub fn f_statistic(dv: f64, p: usize, s2: f64) -> f64 {
+    (dv / (p as f64 / 2.0)) / s2.max(f64::MIN_POSITIVE)
+}
+
+/// The critical value of [`f_statistic`] at significance `alpha` for `p` parameters (the
+/// denominator degrees of freedom are large here, so `chi2_p / p`).
+pub fn f_critical(p: usize, alpha: f64) -> f64 {
+    chi2_upper(p as f64, alpha) / p as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantiles() {
+        assert!((normal_quantile(0.975) - 1.959964).abs() < 1e-5);
+        assert!((normal_quantile(0.001) + 3.090232).abs() < 1e-5);
+        // chi2_10 upper 5%: 18.307
+        assert!((chi2_upper(10.0, 0.05) - 18.307).abs() < 0.1);
+        // chi2_100 upper 0.1%: 149.449
+        assert!((chi2_upper(100.0, 0.001) - 149.449).abs() < 0.5);
+    }
+}
