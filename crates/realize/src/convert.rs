@@ -12,26 +12,28 @@
 //!   Hankel matrix of its Markov parameters `R_1..R_l`, which has finite rank because the
 //!   part is nilpotent.
 //! - [`StateSpace::to_modal`]: the inverse for a continuous model. The eigenvalues at
-//!   (numerically) zero are separated from the rest by a block diagonalisation whose zero
-//!   block is exact even for defective `A`: the invariant subspace of the zero eigenvalues
-//!   is the orthogonal complement of the *left* invariant subspace of the others, which the
-//!   left eigenvectors span. The nilpotent part then gives `sum_k C0 N^(k-1) B0 / s^k`
-//!   exactly (double integrators included), and the rest is read off the eigenvectors
-//!   (the nonzero part must be diagonalizable).
+//!   (numerically) zero are separated from the rest by a block diagonalisation that never
+//!   uses an eigenvector of the zero cluster (which is defective for double integrators):
+//!   the eigenvectors of the other eigenvalues span their invariant subspace, its
+//!   orthogonal complement completes the basis, and a Sylvester equation removes the
+//!   coupling. The nilpotent part then gives `sum_k C0 N^(k-1) B0 / s^k` exactly, and the
+//!   rest is read off the eigenvectors (the nonzero part must be diagonalizable).
+//!
+//! Rank decisions: a singular value counts when it exceeds
+//! `max(rank_tol, max(rows, cols) eps)` times the largest singular value of the same
+//! matrix, so `rank_tol = 0` gives the numerical rank at working precision.
 
 use crate::{ModalModel, PolePair, RealPole, RealizeError, StateSpace, TimeDomain, C64};
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 
 /// Default relative tolerance of [`StateSpace::to_modal`]: eigenvalues with
-/// `|lambda| <= 1e-6 ||A||_F` are treated as poles at the origin (a double integrator's
-/// pair splits by about `sqrt(eps ||A||)` in floating point, a triple one by
-/// `(eps ||A||^2)^(1/3)`, both far below this).
-pub const DEFAULT_ZERO_TOL: f64 = 1e-6;
-
-/// Relative distance below which eigenvalues of [`StateSpace::to_modal`] are merged into
-/// one pole with the summed residue (repeated modes of a block-diagonal realization).
-const MERGE_TOL: f64 = 1e-13;
+/// `|lambda| <= 1e-4 ||A||_F` are treated as poles at the origin. A Jordan block of size
+/// `k` at zero (a chain of `k` integrators) splits in floating point into eigenvalues of
+/// size about `eps^(1/k) ||A||`: `1.5e-8 ||A||` for a double integrator, `6e-6 ||A||` for
+/// a triple one, both below this. Poles that are genuinely that slow compared with the
+/// fastest dynamics need [`StateSpace::to_modal_with_tol`] with a smaller tolerance.
+pub const DEFAULT_ZERO_TOL: f64 = 1e-4;
 
 fn check_rank_tol(rank_tol: f64) -> Result<(), RealizeError> {
     if rank_tol.is_finite() && rank_tol >= 0.0 {
@@ -60,7 +62,7 @@ struct Dyad<T> {
 }
 
 /// The dyads of the SVD of a complex matrix whose singular values exceed
-/// `rank_tol * sigma_max` (all nonzero ones when `rank_tol = 0`): `R ~ sum sigma u v^H`.
+/// `max(rank_tol, max(rows, cols) eps) * sigma_max`: `R ~ sum sigma u v^H`.
 fn truncated_svd_c(
     r: &Mat<C64>,
     rank_tol: f64,
@@ -72,10 +74,11 @@ fn truncated_svd_c(
     let svd = r.thin_svd().map_err(|_| svd_failed(what))?;
     let s = svd.S().column_vector();
     let smax = s[0].re;
+    let rank_tol = rank_tol.max(r.nrows().max(r.ncols()) as f64 * f64::EPSILON);
     let mut out = Vec::new();
     for k in 0..s.nrows() {
         let sk = s[k].re;
-        if !(sk > rank_tol * smax) || sk == 0.0 {
+        if sk.is_nan() || sk <= rank_tol * smax || sk == 0.0 {
             break;
         }
         out.push(Dyad {
@@ -99,10 +102,11 @@ fn truncated_svd_r(
     let svd = r.thin_svd().map_err(|_| svd_failed(what))?;
     let s = svd.S().column_vector();
     let smax = s[0];
+    let rank_tol = rank_tol.max(r.nrows().max(r.ncols()) as f64 * f64::EPSILON);
     let mut out = Vec::new();
     for k in 0..s.nrows() {
         let sk = s[k];
-        if !(sk > rank_tol * smax) || sk == 0.0 {
+        if sk.is_nan() || sk <= rank_tol * smax || sk == 0.0 {
             break;
         }
         out.push(Dyad {
@@ -233,7 +237,8 @@ impl ModalModel {
     /// `2 x 2` block `[[sigma, omega], [-omega, sigma]]` per retained singular value of
     /// each pole pair's residue (`p = sigma + j omega`), then the real poles; `D` is the
     /// feedthrough. Singular values below `rank_tol` times the largest of the same matrix
-    /// are dropped (`rank_tol = 0` keeps every nonzero one), so the state dimension is
+    /// are dropped (`rank_tol = 0`: the numerical rank at working precision, see the
+    /// [module documentation](crate::convert)), so the state dimension is
     /// [`ModalModel::order`]`(rank_tol)`.
     pub fn to_state_space(&self, rank_tol: f64) -> Result<StateSpace, RealizeError> {
         check_rank_tol(rank_tol)?;
@@ -392,68 +397,96 @@ fn evd_failed(what: &str) -> RealizeError {
     }
 }
 
-/// Eigenvalues and eigenvectors of a real matrix, split into the near-zero ones (indices
-/// only) and the others: `pairs` (Im > 0) and `reals` (Im = 0).
-struct SplitEigen {
-    values: Vec<C64>,
-    vectors: Mat<C64>,
-    zero: usize,
-    pairs: Vec<usize>,
-    reals: Vec<usize>,
+/// Relative distance below which eigenvalues form one (semisimple, repeated) pole.
+const CLUSTER_TOL: f64 = 1e-10;
+
+/// Largest acceptable condition number of the (column-normalised) eigenvector basis.
+const MAX_EIGVEC_COND: f64 = 1e10;
+
+/// A group of (numerically) equal eigenvalues: the pole and a basis of its eigenspace.
+struct Cluster {
+    pole: C64,
+    /// Eigenvectors, `n` entries each (complex for a pair, real parts for a real pole).
+    vectors: Vec<Vec<C64>>,
 }
 
-fn split_eigen(a: &Mat<f64>, thresh: f64, what: &str) -> Result<SplitEigen, RealizeError> {
-    let e = a.eigen().map_err(|_| evd_failed(what))?;
-    let n = a.nrows();
-    let s = e.S().column_vector();
-    let values: Vec<C64> = (0..n).map(|i| s[i]).collect();
-    let vectors = Mat::from_fn(n, n, |i, j| e.U()[(i, j)]);
-    let mut zero = 0;
-    let mut pairs = Vec::new();
-    let mut reals = Vec::new();
-    let mut lower = 0;
-    for (i, l) in values.iter().enumerate() {
-        if !(l.re.is_finite() && l.im.is_finite()) {
-            return Err(evd_failed(what));
-        }
-        if l.norm() <= thresh {
-            zero += 1;
-        } else if l.im > 0.0 {
-            pairs.push(i);
-        } else if l.im == 0.0 {
-            reals.push(i);
-        } else {
-            lower += 1;
+/// Groups `idx` (indices into `values`) into clusters of equal eigenvalues.
+fn cluster(values: &[C64], idx: &[usize]) -> Vec<Vec<usize>> {
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for &i in idx {
+        let l = values[i];
+        match groups
+            .iter_mut()
+            .find(|g| (values[g[0]] - l).norm() <= CLUSTER_TOL * l.norm())
+        {
+            Some(g) => g.push(i),
+            None => groups.push(vec![i]),
         }
     }
-    if lower != pairs.len() {
-        return Err(RealizeError::Numerical {
-            what: format!("eigendecomposition of {what}"),
-            why: "complex eigenvalues are not in conjugate pairs".into(),
+    groups
+}
+
+/// Eigenvectors of the cluster `members` of `a`: the computed eigenvector for a simple
+/// eigenvalue; for a repeated one the null space of `A - lambda I` (right singular
+/// vectors of its `k` smallest singular values), which is well defined where single
+/// eigenvectors are not. Fails when the null space is smaller than the multiplicity
+/// (a defective eigenvalue).
+fn cluster_basis(
+    a: &Mat<f64>,
+    values: &[C64],
+    vectors: &Mat<C64>,
+    members: &[usize],
+) -> Result<Cluster, RealizeError> {
+    let n = a.nrows();
+    let k = members.len();
+    let pole = members.iter().map(|&i| values[i]).sum::<C64>() / k as f64;
+    if k == 1 {
+        let j = members[0];
+        return Ok(Cluster {
+            pole,
+            vectors: vec![(0..n).map(|i| vectors[(i, j)]).collect()],
         });
     }
-    Ok(SplitEigen {
-        values,
-        vectors,
-        zero,
-        pairs,
-        reals,
-    })
-}
-
-/// Real basis of the span of the selected eigenvectors: `[Re v, Im v]` per pair, `Re v`
-/// per real eigenvalue.
-fn realify(e: &SplitEigen) -> Mat<f64> {
-    let n = e.vectors.nrows();
-    let mut cols: Vec<Vec<f64>> = Vec::new();
-    for &j in &e.pairs {
-        cols.push((0..n).map(|i| e.vectors[(i, j)].re).collect());
-        cols.push((0..n).map(|i| e.vectors[(i, j)].im).collect());
+    let defective = || RealizeError::Numerical {
+        what: "to_modal".into(),
+        why: format!(
+            "the eigenvalue {pole} of multiplicity {k} is defective (A is not \
+             diagonalizable away from 0)"
+        ),
+    };
+    if pole.im == 0.0 {
+        let shifted = Mat::from_fn(n, n, |i, j| a[(i, j)] - if i == j { pole.re } else { 0.0 });
+        let svd = shifted.svd().map_err(|_| svd_failed("A - lambda I"))?;
+        let s = svd.S().column_vector();
+        let small = s[n - k];
+        if small.is_nan() || small > 1e-8 * s[0].max(pole.norm()) {
+            return Err(defective());
+        }
+        let v = svd.V();
+        Ok(Cluster {
+            pole,
+            vectors: (n - k..n)
+                .map(|c| (0..n).map(|i| C64::new(v[(i, c)], 0.0)).collect())
+                .collect(),
+        })
+    } else {
+        let shifted = Mat::from_fn(n, n, |i, j| {
+            C64::new(a[(i, j)], 0.0) - if i == j { pole } else { C64::new(0.0, 0.0) }
+        });
+        let svd = shifted.svd().map_err(|_| svd_failed("A - lambda I"))?;
+        let s = svd.S().column_vector();
+        let small = s[n - k].re;
+        if small.is_nan() || small > 1e-8 * s[0].re.max(pole.norm()) {
+            return Err(defective());
+        }
+        let v = svd.V();
+        Ok(Cluster {
+            pole,
+            vectors: (n - k..n)
+                .map(|c| (0..n).map(|i| v[(i, c)]).collect())
+                .collect(),
+        })
     }
-    for &j in &e.reals {
-        cols.push((0..n).map(|i| e.vectors[(i, j)].re).collect());
-    }
-    Mat::from_fn(n, cols.len(), |i, j| cols[j][i])
 }
 
 impl StateSpace {
@@ -464,20 +497,32 @@ impl StateSpace {
 
     /// The modal (partial-fraction) form of a continuous model.
     ///
-    /// Eigenvalues with `|lambda| <= zero_tol ||A||_F` are poles at the origin. With `U0`
-    /// an orthonormal basis of their invariant subspace (the orthogonal complement of the
-    /// left eigenvectors of the other eigenvalues, so no eigenvector of the possibly
-    /// defective zero cluster is ever used) and `V1` the real and imaginary parts of the
-    /// right eigenvectors of the others, `T = [U0, V1]` block-diagonalises `A`:
-    /// `T^-1 A T = diag(N, Lambda)`. The nilpotent block gives the rigid-body part
-    /// `rigid[k-1] = C U0 N^(k-1) (T^-1 B)_0` exactly (Jordan chains such as double
-    /// integrators included; terms at roundoff level of their factors are set to zero and
-    /// trailing zero terms dropped); every other eigenvalue `lambda` with right
-    /// eigenvector `v` gives the residue `(C v) (w^T B)` with `w^T` the matching row of
-    /// `T^-1` (for a pair the rows of `Re v` and `Im v` combine to `(r_re - j r_im) / 2`).
-    /// Complex eigenvalues become [`PolePair`]s (`Im > 0`), real ones [`RealPole`]s;
-    /// eigenvalues equal to `1e-13` relative are merged (residues summed). `D` becomes
-    /// the feedthrough. The nonzero eigenvalues must be non-defective.
+    /// 1. Eigenvalues (faer's real EVD) with `|lambda| <= zero_tol ||A||_F` are the poles
+    ///    at the origin (`m` of them); the others are grouped into clusters of equal
+    ///    eigenvalues (relative distance `1e-10`: repeated modes). Each cluster's
+    ///    eigenspace is the computed eigenvector for a simple eigenvalue and the null
+    ///    space of `A - lambda I` (SVD) for a repeated one.
+    /// 2. `V` = the real and imaginary parts of these eigenvectors (`n - m` columns) span
+    ///    the invariant subspace of the nonzero eigenvalues; `Z` = an orthonormal basis
+    ///    of its orthogonal complement. With `T = [Z, V]`,
+    ///    `T^-1 A T = [[N, 0], [X, Lambda]]` is block lower triangular with `N` holding
+    ///    the zero eigenvalues (exactly, even for defective `A`: no eigenvector of the
+    ///    zero cluster is used) and `Lambda` real block diagonal.
+    /// 3. The Sylvester equation `Lambda Y - Y N + X = 0` decouples the blocks (it
+    ///    separates into one small `m x m` solve per eigenvector, since `Lambda` is block
+    ///    diagonal; Golub & Van Loan, *Matrix Computations*, 4th ed., sec. 7.6.3, block
+    ///    diagonalization). Then the rigid-body part is
+    ///    `rigid[k-1] = (C Z + C V Y) N^(k-1) B_Z`, `k = 1..m`, exactly (double and triple
+    ///    integrators included; terms at roundoff level of their factors are set to zero
+    ///    and trailing zero terms dropped), and an eigenvalue `lambda` with eigenvectors
+    ///    `v_i` has the residue `sum_i (C v_i) (r_re,i - j r_im,i) / 2`, where
+    ///    `r_re,i, r_im,i` are the rows of `B_V - Y B_Z` of `Re v_i` and `Im v_i`
+    ///    (`(C v_i) r_i` for a real pole).
+    ///
+    /// Complex eigenvalues become [`PolePair`]s (`Im > 0`), real ones [`RealPole`]s, `D`
+    /// the feedthrough. The nonzero eigenvalues must be non-defective: a defective
+    /// repeated eigenvalue, or an eigenvector basis with condition number above `1e10`,
+    /// is a [`RealizeError::Numerical`].
     pub fn to_modal_with_tol(&self, zero_tol: f64) -> Result<ModalModel, RealizeError> {
         if self.domain != TimeDomain::Continuous {
             return Err(RealizeError::WrongDomain {
@@ -498,76 +543,158 @@ impl StateSpace {
         if n == 0 {
             return Ok(model);
         }
-        let thresh = zero_tol * self.a.norm_l2();
-        let right = split_eigen(&self.a, thresh, "A")?;
-        let m = right.zero;
-        // Orthonormal basis U0 of the zero-eigenvalue invariant subspace.
-        let u0: Mat<f64> = if m == 0 {
-            Mat::zeros(n, 0)
-        } else if m == n {
+        let a = &self.a;
+        let thresh = zero_tol * a.norm_l2();
+
+        // 1. Eigenvalues, the zero cluster, and eigenspaces of the others.
+        let e = a.eigen().map_err(|_| evd_failed("A"))?;
+        let values: Vec<C64> = (0..n).map(|i| e.S().column_vector()[i]).collect();
+        let vectors = Mat::from_fn(n, n, |i, j| e.U()[(i, j)]);
+        let (mut upper, mut reals, mut lower, mut m) = (Vec::new(), Vec::new(), 0usize, 0usize);
+        for (i, l) in values.iter().enumerate() {
+            if !(l.re.is_finite() && l.im.is_finite()) {
+                return Err(evd_failed("A"));
+            }
+            if l.norm() <= thresh {
+                m += 1;
+            } else if l.im > 0.0 {
+                upper.push(i);
+            } else if l.im == 0.0 {
+                reals.push(i);
+            } else {
+                lower += 1;
+            }
+        }
+        if lower != upper.len() {
+            return Err(RealizeError::Numerical {
+                what: "eigendecomposition of A".into(),
+                why: "complex eigenvalues are not in conjugate pairs".into(),
+            });
+        }
+        let pair_clusters = cluster(&values, &upper)
+            .iter()
+            .map(|g| cluster_basis(a, &values, &vectors, g))
+            .collect::<Result<Vec<_>, _>>()?;
+        let real_clusters = cluster(&values, &reals)
+            .iter()
+            .map(|g| cluster_basis(a, &values, &vectors, g))
+            .collect::<Result<Vec<_>, _>>()?;
+
+        // 2. V (realified eigenvectors, interleaved Re/Im per vector), Z, T = [Z, V].
+        // Each eigenvector is scaled to unit norm as a whole (Re v and Im v by the same
+        // factor, which keeps the 2 x 2 block structure of Lambda).
+        let unit = |v: &Vec<C64>| -> Vec<C64> {
+            let nrm = v.iter().map(|x| x.norm_sqr()).sum::<f64>().sqrt();
+            let f = if nrm > 0.0 { 1.0 / nrm } else { 1.0 };
+            v.iter().map(|x| x * f).collect()
+        };
+        let mut vcols: Vec<Vec<f64>> = Vec::with_capacity(n - m);
+        for c in &pair_clusters {
+            for v in c.vectors.iter().map(unit) {
+                vcols.push(v.iter().map(|x| x.re).collect());
+                vcols.push(v.iter().map(|x| x.im).collect());
+            }
+        }
+        for c in &real_clusters {
+            for v in c.vectors.iter().map(unit) {
+                vcols.push(v.iter().map(|x| x.re).collect());
+            }
+        }
+        if vcols.len() + m != n {
+            return Err(RealizeError::Numerical {
+                what: "to_modal".into(),
+                why: "eigenvector count does not match the number of states".into(),
+            });
+        }
+        let nv = n - m;
+        let v = Mat::from_fn(n, nv, |i, j| vcols[j][i]);
+        let z: Mat<f64> = if nv == 0 {
             Mat::identity(n, n)
         } else {
-            let at = self.a.transpose().to_owned();
-            let left = split_eigen(&at, thresh, "A^T")?;
-            if left.zero != m {
+            let svd = v.svd().map_err(|_| svd_failed("eigenvector basis"))?;
+            let s = svd.S().column_vector();
+            if s[nv - 1].is_nan() || s[nv - 1] * MAX_EIGVEC_COND <= s[0] {
                 return Err(RealizeError::Numerical {
                     what: "to_modal".into(),
                     why: format!(
-                        "A has {m} eigenvalues below the zero threshold {thresh:e} but A^T has \
-                         {}; choose another zero_tol",
-                        left.zero
+                        "the eigenvectors of the nonzero eigenvalues are (nearly) dependent \
+                         (condition number {:e}): A is not diagonalizable away from 0",
+                        s[0] / s[nv - 1]
                     ),
                 });
             }
-            let w = realify(&left);
-            let svd = w.svd().map_err(|_| svd_failed("left eigenvectors"))?;
-            let s = svd.S().column_vector();
-            let k = n - m;
-            if !(s[k - 1] > 1e3 * f64::EPSILON * n as f64 * s[0]) {
-                return Err(RealizeError::Numerical {
-                    what: "to_modal".into(),
-                    why: "the left eigenvectors of the nonzero eigenvalues are linearly \
-                          dependent (defective nonzero eigenvalue)"
-                        .into(),
-                });
-            }
-            Mat::from_fn(n, m, |i, j| svd.U()[(i, k + j)])
+            Mat::from_fn(n, m, |i, j| svd.U()[(i, nv + j)])
         };
-        let v1 = realify(&right);
-        let t = Mat::from_fn(n, n, |i, j| if j < m { u0[(i, j)] } else { v1[(i, j - m)] });
-        let au0 = &self.a * &u0;
+        let t = Mat::from_fn(n, n, |i, j| if j < m { z[(i, j)] } else { v[(i, j - m)] });
+        let az = a * &z;
         let rhs = Mat::from_fn(n, nu + m, |i, j| {
             if j < nu {
                 self.b[(i, j)]
             } else {
-                au0[(i, j - nu)]
+                az[(i, j - nu)]
             }
         });
         let sol = t.partial_piv_lu().solve(&rhs);
         if !(0..sol.ncols()).all(|j| (0..n).all(|i| sol[(i, j)].is_finite())) {
             return Err(RealizeError::Numerical {
                 what: "to_modal".into(),
-                why: "the modal transformation is singular (defective nonzero eigenvalue)".into(),
+                why: "the modal transformation is singular".into(),
             });
         }
+        let bz = Mat::from_fn(m, nu, |i, j| sol[(i, j)]);
+        let nmat = Mat::from_fn(m, m, |i, j| sol[(i, nu + j)]);
+        let x = Mat::from_fn(nv, m, |i, j| sol[(m + i, nu + j)]);
 
-        // Rigid-body part: C0 N^(k-1) B0.
+        // 3. Y from Lambda Y - Y N + X = 0, row (pair of rows) by row.
+        let mut y = Mat::<f64>::zeros(nv, m);
         if m > 0 {
-            let nmat = Mat::from_fn(m, m, |i, j| sol[(i, nu + j)]);
-            let b0 = Mat::from_fn(m, nu, |i, j| sol[(i, j)]);
-            let c0 = &self.c * &u0;
-            let (nc, nb, nn) = (c0.norm_l2(), b0.norm_l2(), nmat.norm_l2());
+            let mut row = 0;
+            let poles = pair_clusters
+                .iter()
+                .flat_map(|c| c.vectors.iter().map(move |_| (c.pole, true)))
+                .chain(
+                    real_clusters
+                        .iter()
+                        .flat_map(|c| c.vectors.iter().map(move |_| (c.pole, false))),
+                );
+            for (pole, is_pair) in poles {
+                // u (lambda I - N) = -(x_p - j x_q) (pair) or -x_p (real).
+                let lhs = Mat::from_fn(m, m, |i, j| {
+                    (if i == j { pole } else { C64::new(0.0, 0.0) }) - nmat[(j, i)]
+                });
+                let r = Mat::from_fn(m, 1, |i, _| {
+                    let xq = if is_pair { x[(row + 1, i)] } else { 0.0 };
+                    -C64::new(x[(row, i)], -xq)
+                });
+                let u = lhs.partial_piv_lu().solve(&r);
+                for i in 0..m {
+                    y[(row, i)] = u[(i, 0)].re;
+                    if is_pair {
+                        y[(row + 1, i)] = -u[(i, 0)].im;
+                    }
+                }
+                row += if is_pair { 2 } else { 1 };
+            }
+        }
+        let bv = Mat::from_fn(nv, nu, |i, j| sol[(m + i, j)]);
+        let bv = if m > 0 { &bv - &y * &bz } else { bv };
+        let cv = &self.c * &v;
+
+        // Rigid-body part: (C Z + C V Y) N^(k-1) B_Z.
+        if m > 0 {
+            let cz = &self.c * &z + &cv * &y;
+            let (nc, nb, nn) = (cz.norm_l2(), bz.norm_l2(), nmat.norm_l2());
             let mut rigid = Vec::with_capacity(m);
-            let mut x = b0.clone();
+            let mut xk = bz.clone();
             let mut bound = nc * nb;
             for _ in 0..m {
-                let r = &c0 * &x;
+                let r = &cz * &xk;
                 if r.norm_l2() <= 1e-12 * bound {
                     rigid.push(Mat::zeros(ny, nu));
                 } else {
                     rigid.push(r);
                 }
-                x = &nmat * &x;
+                xk = &nmat * &xk;
                 bound *= nn;
             }
             while rigid.last().is_some_and(|r| fro(r) == 0.0) {
@@ -576,49 +703,40 @@ impl StateSpace {
             model.rigid = rigid;
         }
 
-        // Flexible part.
-        let cc = Mat::from_fn(ny, n, |i, j| C64::new(self.c[(i, j)], 0.0));
-        let cv = &cc * &right.vectors;
-        let mut pairs: Vec<PolePair> = Vec::new();
-        for (q, &j) in right.pairs.iter().enumerate() {
-            let (r_re, r_im) = (m + 2 * q, m + 2 * q + 1);
-            let residue = Mat::from_fn(ny, nu, |i, jj| {
-                let w = C64::new(sol[(r_re, jj)], -sol[(r_im, jj)]) * 0.5;
-                cv[(i, j)] * w
+        // Residues.
+        let mut col = 0;
+        for c in &pair_clusters {
+            let mut residue = Mat::<C64>::zeros(ny, nu);
+            for _ in &c.vectors {
+                for i in 0..ny {
+                    let cvi = C64::new(cv[(i, col)], cv[(i, col + 1)]);
+                    for j in 0..nu {
+                        residue[(i, j)] += cvi * C64::new(bv[(col, j)], -bv[(col + 1, j)]) * 0.5;
+                    }
+                }
+                col += 2;
+            }
+            model.pairs.push(PolePair {
+                pole: c.pole,
+                residue,
             });
-            push_merged_pair(&mut pairs, right.values[j], residue);
         }
-        let mut reals: Vec<RealPole> = Vec::new();
-        let off = m + 2 * right.pairs.len();
-        for (q, &j) in right.reals.iter().enumerate() {
-            let residue = Mat::from_fn(ny, nu, |i, jj| cv[(i, j)].re * sol[(off + q, jj)]);
-            push_merged_real(&mut reals, right.values[j].re, residue);
+        for c in &real_clusters {
+            let mut residue = Mat::<f64>::zeros(ny, nu);
+            for _ in &c.vectors {
+                for i in 0..ny {
+                    for j in 0..nu {
+                        residue[(i, j)] += cv[(i, col)] * bv[(col, j)];
+                    }
+                }
+                col += 1;
+            }
+            model.real_poles.push(RealPole {
+                pole: c.pole.re,
+                residue,
+            });
         }
-        model.pairs = pairs;
-        model.real_poles = reals;
         model.validate()?;
         Ok(model)
-    }
-}
-
-fn push_merged_pair(pairs: &mut Vec<PolePair>, pole: C64, residue: Mat<C64>) {
-    if let Some(p) = pairs
-        .iter_mut()
-        .find(|p| (p.pole - pole).norm() <= MERGE_TOL * pole.norm())
-    {
-        p.residue += residue;
-    } else {
-        pairs.push(PolePair { pole, residue });
-    }
-}
-
-fn push_merged_real(reals: &mut Vec<RealPole>, pole: f64, residue: Mat<f64>) {
-    if let Some(p) = reals
-        .iter_mut()
-        .find(|p| (p.pole - pole).abs() <= MERGE_TOL * pole.abs())
-    {
-        p.residue += residue;
-    } else {
-        reals.push(RealPole { pole, residue });
     }
 }

@@ -283,7 +283,7 @@ impl HessenbergForm {
                     }
                 }
                 let p = m[k * n + k];
-                if !(p.norm() > tol) {
+                if p.norm().is_nan() || p.norm() <= tol {
                     return Err(Singular);
                 }
                 let l = m[(k + 1) * n + k] / p;
@@ -293,7 +293,7 @@ impl HessenbergForm {
                     let t = m[k * n + j];
                     m[(k + 1) * n + j] -= l * t;
                 }
-            } else if !(m[k * n + k].norm() > tol) {
+            } else if m[k * n + k].norm().is_nan() || m[k * n + k].norm() <= tol {
                 return Err(Singular);
             }
         }

@@ -95,7 +95,11 @@ fn nilpotent_gives_finite_series() {
         let e = expm(n.as_ref()).unwrap();
         // Squaring a highly non-normal matrix (the 2005 algorithm's known overscaling)
         // costs a few digits more than the normal cases above.
-        assert!(rel(&e, &want) < 1e-13, "scale {scale}: {:e}", rel(&e, &want));
+        assert!(
+            rel(&e, &want) < 1e-13,
+            "scale {scale}: {:e}",
+            rel(&e, &want)
+        );
     }
     // The double integrator: exp([[0, T], [0, 0]]) = [[1, T], [0, 1]].
     let t = 0.37;
@@ -127,14 +131,23 @@ fn small_random_matrices_match_taylor_series() {
     // Norms from below theta_3 to above theta_13 (the Taylor reference is evaluated on
     // A / 2^k and squared back for the larger ones, with enough terms to be exact).
     let mut r = rng(7);
-    for (case, &target) in [0.01, 0.2, 0.8, 1.9, 4.0, 12.0].iter().cycle().take(36).enumerate() {
+    for (case, &target) in [0.01, 0.2, 0.8, 1.9, 4.0, 12.0]
+        .iter()
+        .cycle()
+        .take(36)
+        .enumerate()
+    {
         let n = 1 + case % 6;
         let g = Mat::from_fn(n, n, |_, _| gauss(&mut r));
         let nrm = (0..n)
             .map(|j| (0..n).map(|i| g[(i, j)].abs()).sum::<f64>())
             .fold(0.0, f64::max);
         let a = Mat::from_fn(n, n, |i, j| g[(i, j)] * target / nrm);
-        let squarings = if target > 1.0 { (target.log2().ceil()) as i32 } else { 0 };
+        let squarings = if target > 1.0 {
+            (target.log2().ceil()) as i32
+        } else {
+            0
+        };
         let scaled = Mat::from_fn(n, n, |i, j| a[(i, j)] / 2f64.powi(squarings));
         let mut want = taylor(&scaled, 40);
         for _ in 0..squarings {
@@ -142,7 +155,10 @@ fn small_random_matrices_match_taylor_series() {
         }
         let e = expm(a.as_ref()).unwrap();
         let err = rel(&e, &want);
-        assert!(err < 1e-13 * (1.0 + target), "n = {n}, |A|_1 = {target}: {err:e}");
+        assert!(
+            err < 1e-13 * (1.0 + target),
+            "n = {n}, |A|_1 = {target}: {err:e}"
+        );
     }
 }
 
@@ -170,9 +186,15 @@ fn rejects_bad_input() {
         Err(RealizeError::Dimension { .. })
     ));
     let a = Mat::from_fn(2, 2, |i, j| if i == j { f64::NAN } else { 0.0 });
-    assert!(matches!(expm(a.as_ref()), Err(RealizeError::NonFinite { .. })));
+    assert!(matches!(
+        expm(a.as_ref()),
+        Err(RealizeError::NonFinite { .. })
+    ));
     let a = Mat::from_fn(1, 1, |_, _| 1e5);
-    assert!(matches!(expm(a.as_ref()), Err(RealizeError::Numerical { .. })));
+    assert!(matches!(
+        expm(a.as_ref()),
+        Err(RealizeError::Numerical { .. })
+    ));
     let empty = Mat::<f64>::zeros(0, 0);
     assert_eq!(expm(empty.as_ref()).unwrap().nrows(), 0);
 }

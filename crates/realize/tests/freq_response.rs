@@ -93,10 +93,16 @@ fn defective_a_matches_closed_form() {
     let g = rotated.freq_response(&omega).unwrap();
     for (n, &w) in omega.iter().enumerate() {
         let s = s_of(w);
-        let (rigid, mode) = ((s * s).inv(), k * wd / (s * s + 2.0 * zeta * wn * s + wn * wn));
+        let (rigid, mode) = (
+            (s * s).inv(),
+            k * wd / (s * s + 2.0 * zeta * wn * s + wn * wn),
+        );
         let err = (g.get(n, 0, 0) - (rigid + mode)).norm() / (rigid.norm() + mode.norm());
         let bound = 1e-11 + 10.0 * sens / (w * w);
-        assert!(err < bound, "rotated, w = {w}: rel. error {err:e} > {bound:e}");
+        assert!(
+            err < bound,
+            "rotated, w = {w}: rel. error {err:e} > {bound:e}"
+        );
     }
 }
 
@@ -104,14 +110,25 @@ fn defective_a_matches_closed_form() {
 fn integrator_at_zero_frequency_is_a_pole() {
     let plant = defective_plant(100.0, 0.01, 1.0);
     let err = plant.freq_response(&[1.0, 0.0, 2.0]).unwrap_err();
-    assert_eq!(err, RealizeError::AtPole { point: 1, omega: 0.0 });
+    assert_eq!(
+        err,
+        RealizeError::AtPole {
+            point: 1,
+            omega: 0.0
+        }
+    );
     // An undamped mode evaluated exactly at its frequency.
     let a = Mat::from_fn(2, 2, |i, j| match (i, j) {
         (0, 1) => 5.0,
         (1, 0) => -5.0,
         _ => 0.0,
     });
-    let m = ss(a, Mat::from_fn(2, 1, |_, _| 1.0), Mat::from_fn(1, 2, |_, _| 1.0), Mat::zeros(1, 1));
+    let m = ss(
+        a,
+        Mat::from_fn(2, 1, |_, _| 1.0),
+        Mat::from_fn(1, 2, |_, _| 1.0),
+        Mat::zeros(1, 1),
+    );
     assert!(matches!(
         m.freq_response(&[5.0]),
         Err(RealizeError::AtPole { point: 0, .. })
@@ -144,7 +161,14 @@ fn dense_reference(m: &StateSpace, x: C64) -> Mat<C64> {
 fn random_dense_models_match_dense_lu_on_both_solve_sides() {
     let mut r = rng(21);
     // (n, ny, nu): ny < nu solves for rows, ny >= nu for columns.
-    for &(n, ny, nu) in &[(1, 1, 1), (2, 3, 1), (7, 2, 5), (12, 4, 13), (15, 6, 2), (30, 3, 3)] {
+    for &(n, ny, nu) in &[
+        (1, 1, 1),
+        (2, 3, 1),
+        (7, 2, 5),
+        (12, 4, 13),
+        (15, 6, 2),
+        (30, 3, 3),
+    ] {
         let a = Mat::from_fn(n, n, |_, _| gauss(&mut r));
         let b = Mat::from_fn(n, nu, |_, _| gauss(&mut r));
         let c = Mat::from_fn(ny, n, |_, _| gauss(&mut r));
@@ -263,7 +287,12 @@ fn discrete_double_integrator_matches_z_transform() {
 #[test]
 fn empty_state_gives_feedthrough() {
     let d = Mat::from_fn(2, 3, |i, j| (i + 10 * j) as f64);
-    let m = ss(Mat::zeros(0, 0), Mat::zeros(0, 3), Mat::zeros(2, 0), d.clone());
+    let m = ss(
+        Mat::zeros(0, 0),
+        Mat::zeros(0, 3),
+        Mat::zeros(2, 0),
+        d.clone(),
+    );
     let g = m.freq_response(&[0.0, 1.0]).unwrap();
     for k in 0..2 {
         for i in 0..2 {

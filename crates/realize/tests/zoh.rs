@@ -26,7 +26,10 @@ fn double_integrator_closed_form() {
         for i in 0..2 {
             for j in 0..2 {
                 let e = (d.a[(i, j)] - want_a[i][j]).abs();
-                assert!(e <= 4.0 * f64::EPSILON * want_a[i][j].abs(), "T = {t}: Ad[{i},{j}]");
+                assert!(
+                    e <= 4.0 * f64::EPSILON * want_a[i][j].abs(),
+                    "T = {t}: Ad[{i},{j}]"
+                );
             }
             let e = (d.b[(i, 0)] - want_b[i]).abs() / want_b[i];
             assert!(e <= 4.0 * f64::EPSILON, "T = {t}: Bd[{i}] rel. error {e:e}");

@@ -140,7 +140,12 @@ pub fn grid_with_peaks(m: &ModalModel, lo: f64, hi: f64, points: usize) -> Vec<f
     let mut w: Vec<f64> = (0..points)
         .map(|k| lo * (hi / lo).powf(k as f64 / (points - 1) as f64))
         .collect();
-    w.extend(m.pairs.iter().map(|p| p.pole.im).filter(|&x| x > lo && x < hi));
+    w.extend(
+        m.pairs
+            .iter()
+            .map(|p| p.pole.im)
+            .filter(|&x| x > lo && x < hi),
+    );
     w.sort_by(|a, b| a.partial_cmp(b).unwrap());
     w
 }
