@@ -15,6 +15,7 @@ pub mod dataset;
 pub mod error;
 pub mod estimator;
 pub mod frf;
+pub mod io;
 pub mod model;
 pub mod shared_data;
 pub mod truth;

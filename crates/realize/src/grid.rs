@@ -28,11 +28,10 @@ impl ResponseGrid {
 
     /// Number of frequency points.
     pub fn len(&self) -> usize {
-        if self.ny * self.nu == 0 {
-            0
-        } else {
-            self.values.len() / (self.ny * self.nu)
-        }
+        self.values
+            .len()
+            .checked_div(self.ny * self.nu)
+            .unwrap_or(0)
     }
 
     /// True when the grid has no points.

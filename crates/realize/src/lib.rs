@@ -20,13 +20,19 @@
 //! [`ResponseGrid`] stores one `ny x nu` complex matrix per frequency point, column-major
 //! (`vec(G)`), points one after another.
 
+pub mod convert;
 pub mod error;
+pub mod expm;
 pub mod grid;
+pub mod hessenberg;
 pub mod modal;
 pub mod state_space;
+pub mod zoh;
 
+pub use convert::DEFAULT_ZERO_TOL;
 pub use error::RealizeError;
 pub use grid::ResponseGrid;
+pub use hessenberg::HessenbergForm;
 pub use modal::{ModalModel, PolePair, RealPole};
 pub use state_space::{StateSpace, TimeDomain};
 

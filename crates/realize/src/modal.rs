@@ -131,8 +131,7 @@ impl ModalModel {
                 p.residue.nrows(),
                 p.residue.ncols(),
             )?;
-            if !(p.pole.re.is_finite() && p.pole.im.is_finite()) || !all_finite_complex(&p.residue)
-            {
+            if !(p.pole.re.is_finite() && p.pole.im.is_finite() && all_finite_complex(&p.residue)) {
                 return Err(RealizeError::NonFinite {
                     what: format!("pairs[{k}]"),
                 });
