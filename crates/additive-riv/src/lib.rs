@@ -27,9 +27,9 @@ pub mod numerators;
 pub mod problem;
 pub mod riv;
 pub mod significance;
-pub mod structure;
 pub mod small;
 pub mod step;
+pub mod structure;
 
 pub use init::{initial_model, InitConfig, RigidBody};
 pub use numerators::fit_numerators;

@@ -2,13 +2,12 @@
 //! denominators fixed, each entry of `vec(G)` is a linear least-squares problem in its own
 //! numerator coefficients, solved entry by entry.
 
-use crate::problem::{pack, unpack, Basis, FitData, Layout};
+use crate::problem::{groups, pack, unpack, Basis, EntryLines, FitData, Layout};
 use crate::small::spd_solve;
 use crate::{AdditiveModel, RivError};
 use faer::linalg::matmul::matmul;
 use faer::linalg::solvers::SolveLstsq;
 use faer::{Accum, Mat, Par};
-use frf_data::C64;
 use rayon::prelude::*;
 
 /// Fits every numerator of `model` to `data` with the denominators held fixed
@@ -35,32 +34,35 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
     // regressor and solved by an equilibrated Cholesky: the structure is exploited on
     // purpose (the basis is shared by all entries). When the equilibrated system is
     // ill-conditioned (> 1e10) the entry falls back to a QR of the regressor itself.
+    let ng = groups(model, &lay);
+    let zero = vec![0.0; nn];
     let solve_entry = |e: usize| -> Result<Vec<f64>, RivError> {
-        let sw: Vec<C64> = (0..n)
-            .map(|k| basis.f[k] * data.w[k * m + e].sqrt())
-            .collect();
-        let mut ut = Mat::<f64>::zeros(nn + 1, 2 * n);
-        for k in 0..n {
-            let g = data.g[k * m + e] * data.w[k * m + e].sqrt();
-            {
-                let c = ut.col_as_slice_mut(k);
-                for j in 0..nn {
-                    c[j] = (basis.u[k * nn + j] * sw[k]).re;
-                }
-                c[nn] = g.re;
+        // columns u * s and the target y * s (the divided problem, see EntryLines)
+        let mut el = EntryLines::default();
+        el.fill(e, data, &basis, &ng, &zero[..]);
+        let mut ut = Mat::<f64>::zeros(2 * n, nn + 1);
+        for j in 0..nn {
+            let col = ut.col_as_slice_mut(j);
+            let (cr, ci) = col.split_at_mut(n);
+            for k in 0..n {
+                cr[k] = basis.u_re[j * n + k] * el.s[k];
+                ci[k] = basis.u_im[j * n + k] * el.s[k];
             }
-            let c = ut.col_as_slice_mut(n + k);
-            for j in 0..nn {
-                c[j] = (basis.u[k * nn + j] * sw[k]).im;
+        }
+        {
+            let col = ut.col_as_slice_mut(nn);
+            let (cr, ci) = col.split_at_mut(n);
+            for k in 0..n {
+                cr[k] = el.y_re[k] * el.s[k];
+                ci[k] = el.y_im[k] * el.s[k];
             }
-            c[nn] = g.im;
         }
         let mut z = Mat::<f64>::zeros(nn + 1, nn + 1);
         matmul(
             z.as_mut(),
             Accum::Replace,
-            ut.as_ref(),
             ut.transpose(),
+            ut.as_ref(),
             1.0,
             Par::Seq,
         );
@@ -77,11 +79,12 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
                 return Ok(rhs);
             }
         }
-        // QR fallback on the regressor (column-major copy of the transpose).
+        // QR fallback on the column-equilibrated regressor.
         let mut colscale = vec![0.0f64; nn];
         let mut a = Mat::<f64>::zeros(2 * n, nn);
         for (j, cs) in colscale.iter_mut().enumerate() {
-            let mx = (0..2 * n).fold(0.0f64, |acc, r| acc.max(ut[(j, r)].abs()));
+            let src = ut.col_as_slice(j);
+            let mx = src.iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
             if mx == 0.0 {
                 return Err(RivError::Numerical {
                     what: "numerator least squares".into(),
@@ -89,12 +92,11 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
                 });
             }
             *cs = 1.0 / mx;
-            let col = a.col_as_slice_mut(j);
-            for (r, v) in col.iter_mut().enumerate() {
-                *v = ut[(j, r)] * *cs;
+            for (d, v) in a.col_as_slice_mut(j).iter_mut().zip(src) {
+                *d = v * *cs;
             }
         }
-        let b = Mat::from_fn(2 * n, 1, |r, _| ut[(nn, r)]);
+        let b = Mat::from_fn(2 * n, 1, |r, _| ut[(r, nn)]);
         let x = a.qr().solve_lstsq(&b);
         let sol: Vec<f64> = (0..nn).map(|j| x[(j, 0)] * colscale[j]).collect();
         if sol.iter().any(|v| !v.is_finite()) {
@@ -119,5 +121,5 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
         eta[e * nn..(e + 1) * nn].copy_from_slice(s);
     }
     unpack(model, &lay, &shared, &eta);
-    Ok(crate::problem::cost(data, &lay, &basis, &eta, None))
+    Ok(crate::problem::cost(data, &lay, &basis, &eta, None, &ng))
 }

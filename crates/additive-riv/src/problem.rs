@@ -11,6 +11,7 @@
 
 use crate::{AdditiveModel, RivError};
 use frf_data::{FrfDataset, Weighting, C64};
+use rayon::prelude::*;
 
 /// The data of one fit: frequencies, values and weights in the estimator's layout.
 #[derive(Debug, Clone)]
@@ -29,6 +30,12 @@ pub struct FitData {
     pub w: Vec<f64>,
     /// Frequency band, Hz.
     pub band_hz: (f64, f64),
+    /// Entry-major copies for the per-entry loops: `Re G[e * n + k]`.
+    pub g_re: Vec<f64>,
+    /// `Im G[e * n + k]`.
+    pub g_im: Vec<f64>,
+    /// `sqrt(w)[e * n + k]`.
+    pub sqrt_w: Vec<f64>,
 }
 
 impl FitData {
@@ -65,15 +72,49 @@ impl FitData {
             ));
         }
         let w = weighting.weights(data)?;
-        Ok(Self {
+        Ok(Self::from_parts(
+            omega,
+            ny,
+            nu,
+            g,
+            w,
+            (data.freq_hz(0), data.freq_hz(n - 1)),
+        ))
+    }
+
+    /// Builds the problem from line-major values and weights (`[k * m + e]`).
+    pub fn from_parts(
+        omega: Vec<f64>,
+        ny: usize,
+        nu: usize,
+        g: Vec<C64>,
+        w: Vec<f64>,
+        band_hz: (f64, f64),
+    ) -> Self {
+        let n = omega.len();
+        let m = ny * nu;
+        let mut g_re = vec![0.0; n * m];
+        let mut g_im = vec![0.0; n * m];
+        let mut sqrt_w = vec![0.0; n * m];
+        for k in 0..n {
+            for e in 0..m {
+                g_re[e * n + k] = g[k * m + e].re;
+                g_im[e * n + k] = g[k * m + e].im;
+                sqrt_w[e * n + k] = w[k * m + e].sqrt();
+            }
+        }
+        Self {
             n,
             ny,
             nu,
-            band_hz: (data.freq_hz(0), data.freq_hz(n - 1)),
             omega,
             g,
             w,
-        })
+            band_hz,
+            g_re,
+            g_im,
+            sqrt_w,
+        }
     }
 
     /// Number of entries `ny * nu`.
@@ -184,16 +225,25 @@ pub fn unpack(model: &mut AdditiveModel, lay: &Layout, shared: &[f64], eta: &[f6
     }
 }
 
-/// Per-line quantities of the current denominators: the numerator basis
-/// `u_j(k) = x^r / (pi(x) A(x))` (the regressor (25)), the denominator factors
-/// `-x^r / A(x)` whose product with a submodel's response is the gradient column (12),
-/// and the known factor.
+/// Per-line quantities of the current denominators, stored column by column (one
+/// contiguous run of lines per column, real and imaginary parts apart) so that the
+/// per-entry loops run over lines and vectorise:
+///
+/// - the numerator basis `u_j(k) = x^r / (pi(x) A(x))` (the regressor (25));
+/// - the denominator factors `d_d(k) = -x^r / A(x)`, whose product with a submodel's
+///   response is its gradient column (12);
+/// - the known factor `F_k`, its modulus and inverse.
 pub struct Basis {
-    /// `u[k * n_num + j]`.
-    pub u: Vec<C64>,
-    /// `dcol[k * n_den + d]`: `-x^r / A_i(x)` for denominator coefficient `d` (of
-    /// submodel `i`, power `r`).
-    pub dcol: Vec<C64>,
+    /// Number of lines.
+    pub n: usize,
+    /// `Re u_j(k)` at `[j * n + k]`.
+    pub u_re: Vec<f64>,
+    /// `Im u_j(k)` at `[j * n + k]`.
+    pub u_im: Vec<f64>,
+    /// `Re d_d(k)` at `[d * n + k]`.
+    pub d_re: Vec<f64>,
+    /// `Im d_d(k)` at `[d * n + k]`.
+    pub d_im: Vec<f64>,
     /// Known factor `F_k`.
     pub f: Vec<C64>,
     /// `|F_k|`.
@@ -206,23 +256,31 @@ impl Basis {
     /// Evaluates the basis of `model` at `omega`.
     pub fn new(model: &AdditiveModel, lay: &Layout, omega: &[f64]) -> Self {
         let n = omega.len();
-        let mut u = Vec::with_capacity(n * lay.n_num);
-        let mut dcol = Vec::with_capacity(n * lay.n_den);
+        let mut u_re = vec![0.0; n * lay.n_num];
+        let mut u_im = vec![0.0; n * lay.n_num];
+        let mut d_re = vec![0.0; n * lay.n_den];
+        let mut d_im = vec![0.0; n * lay.n_den];
         let mut f = Vec::with_capacity(n);
-        for &w in omega {
-            for s in &model.submodels {
+        for (k, &w) in omega.iter().enumerate() {
+            for (i, s) in model.submodels.iter().enumerate() {
                 let x = model.variable(s, w);
                 let a = s.den_at(x);
                 let pa = (model.integrator_factor(s.integrators, x) * a).inv();
                 let mut xr = x.powi(s.num_start as i32);
-                for _ in 0..s.num.len() {
-                    u.push(xr * pa);
+                for t in 0..s.num.len() {
+                    let v = xr * pa;
+                    let j = lay.num_offset[i] + t;
+                    u_re[j * n + k] = v.re;
+                    u_im[j * n + k] = v.im;
                     xr *= x;
                 }
                 let ia = a.inv();
                 let mut xr = x;
-                for _ in 0..s.den.len() {
-                    dcol.push(-xr * ia);
+                for t in 0..s.den.len() {
+                    let v = -xr * ia;
+                    let d = lay.den_offset[i] + t;
+                    d_re[d * n + k] = v.re;
+                    d_im[d * n + k] = v.im;
                     xr *= x;
                 }
             }
@@ -231,47 +289,153 @@ impl Basis {
         let f_abs = f.iter().map(|z| z.norm()).collect();
         let f_inv = f.iter().map(|z| z.inv()).collect();
         Self {
-            u,
-            dcol,
+            n,
+            u_re,
+            u_im,
+            d_re,
+            d_im,
             f,
             f_abs,
             f_inv,
         }
     }
+
+    /// `u_j(k)` as a complex number.
+    #[inline]
+    pub fn u(&self, j: usize, k: usize) -> C64 {
+        C64::new(self.u_re[j * self.n + k], self.u_im[j * self.n + k])
+    }
+}
+
+/// Per-entry work arrays over the lines: the divided data `y = G / F`, the scale
+/// `s = sqrt(w) |F|` of the divided problem (`w |G - F P|^2 = s^2 |y - P|^2`), and the
+/// submodel responses `P_i` with their sum.
+#[derive(Default)]
+pub struct EntryLines {
+    /// `Re y`.
+    pub y_re: Vec<f64>,
+    /// `Im y`.
+    pub y_im: Vec<f64>,
+    /// `s = sqrt(w) |F|`.
+    pub s: Vec<f64>,
+    /// `Re P_i(k)` at `[i * n + k]`.
+    pub p_re: Vec<f64>,
+    /// `Im P_i(k)` at `[i * n + k]`.
+    pub p_im: Vec<f64>,
+    /// `Re E = Re (y - sum_i P_i)`.
+    pub e_re: Vec<f64>,
+    /// `Im E`.
+    pub e_im: Vec<f64>,
+}
+
+impl EntryLines {
+    /// Fills the arrays for entry `e` with numerators `be` (this entry's block of `eta`).
+    /// `groups` lists `(first numerator index, count)` per submodel.
+    pub fn fill(
+        &mut self,
+        e: usize,
+        data: &FitData,
+        basis: &Basis,
+        groups: &[(usize, usize)],
+        be: &[f64],
+    ) {
+        let n = data.n;
+        let k_sub = groups.len();
+        self.y_re.resize(n, 0.0);
+        self.y_im.resize(n, 0.0);
+        self.s.resize(n, 0.0);
+        self.p_re.clear();
+        self.p_re.resize(k_sub * n, 0.0);
+        self.p_im.clear();
+        self.p_im.resize(k_sub * n, 0.0);
+        self.e_re.resize(n, 0.0);
+        self.e_im.resize(n, 0.0);
+        let gr = &data.g_re[e * n..(e + 1) * n];
+        let gi = &data.g_im[e * n..(e + 1) * n];
+        let sw = &data.sqrt_w[e * n..(e + 1) * n];
+        for k in 0..n {
+            let fi = basis.f_inv[k];
+            self.y_re[k] = gr[k] * fi.re - gi[k] * fi.im;
+            self.y_im[k] = gr[k] * fi.im + gi[k] * fi.re;
+            self.s[k] = sw[k] * basis.f_abs[k];
+        }
+        self.e_re.copy_from_slice(&self.y_re);
+        self.e_im.copy_from_slice(&self.y_im);
+        for (i, &(off, cnt)) in groups.iter().enumerate() {
+            let pr = &mut self.p_re[i * n..(i + 1) * n];
+            let pi = &mut self.p_im[i * n..(i + 1) * n];
+            for j in off..off + cnt {
+                let b = be[j];
+                let ur = &basis.u_re[j * n..(j + 1) * n];
+                let ui = &basis.u_im[j * n..(j + 1) * n];
+                for k in 0..n {
+                    pr[k] += b * ur[k];
+                    pi[k] += b * ui[k];
+                }
+            }
+            for k in 0..n {
+                self.e_re[k] -= pr[k];
+                self.e_im[k] -= pi[k];
+            }
+        }
+    }
+
+    /// `sum_k s^2 |E|^2` of the entry.
+    pub fn cost(&self) -> f64 {
+        let mut c = 0.0;
+        for k in 0..self.s.len() {
+            c +=
+                self.s[k] * self.s[k] * (self.e_re[k] * self.e_re[k] + self.e_im[k] * self.e_im[k]);
+        }
+        c
+    }
+}
+
+/// `(first numerator index, count)` per submodel.
+pub fn groups(model: &AdditiveModel, lay: &Layout) -> Vec<(usize, usize)> {
+    model
+        .submodels
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (lay.num_offset[i], s.num.len()))
+        .collect()
 }
 
 /// Weighted cost `sum_k sum_e w |G - F P|^2` of `eta` given the basis, and optionally
-/// the residual `E = G - F P` (in the data's layout).
+/// the residual `E = G - F P` (in the data's line-major layout).
 pub fn cost(
     data: &FitData,
     lay: &Layout,
     basis: &Basis,
     eta: &[f64],
     resid: Option<&mut Vec<C64>>,
+    groups: &[(usize, usize)],
 ) -> f64 {
     let m = data.m();
+    let n = data.n;
     let nn = lay.n_num;
-    let mut total = 0.0;
-    let mut out = resid;
-    if let Some(r) = out.as_deref_mut() {
-        r.clear();
-        r.resize(data.n * m, C64::new(0.0, 0.0));
-    }
-    for k in 0..data.n {
-        let uk = &basis.u[k * nn..(k + 1) * nn];
-        let fk = basis.f[k];
-        for e in 0..m {
-            let be = &eta[e * nn..(e + 1) * nn];
-            let mut p = C64::new(0.0, 0.0);
-            for j in 0..nn {
-                p += uk[j] * be[j];
+    match resid {
+        None => (0..m)
+            .into_par_iter()
+            .map_init(EntryLines::default, |el, e| {
+                el.fill(e, data, basis, groups, &eta[e * nn..(e + 1) * nn]);
+                el.cost()
+            })
+            .sum(),
+        Some(r) => {
+            r.clear();
+            r.resize(n * m, C64::new(0.0, 0.0));
+            let mut total = 0.0;
+            let mut el = EntryLines::default();
+            for e in 0..m {
+                el.fill(e, data, basis, groups, &eta[e * nn..(e + 1) * nn]);
+                total += el.cost();
+                for k in 0..n {
+                    // E of the undivided problem: F (y - P)
+                    r[k * m + e] = basis.f[k] * C64::new(el.e_re[k], el.e_im[k]);
+                }
             }
-            let err = data.g[k * m + e] - fk * p;
-            total += data.w[k * m + e] * err.norm_sqr();
-            if let Some(r) = out.as_deref_mut() {
-                r[k * m + e] = err;
-            }
+            total
         }
     }
-    total
 }

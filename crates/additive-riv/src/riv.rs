@@ -2,7 +2,7 @@
 //! paper iterated to convergence, with the weighting of section 4.3 or the
 //! maximum-likelihood weighting when the data carry a variance.
 
-use crate::problem::{cost, pack, unpack, Basis, FitData, Layout};
+use crate::problem::{cost, groups, pack, unpack, Basis, FitData, Layout};
 use crate::step::{step, IvMethod, StepSolver};
 use crate::{AdditiveModel, RivError};
 use frf_data::{Convergence, Estimator, Fit, FrfDataset, ModelStructure, ProgressSink, Weighting};
@@ -152,7 +152,8 @@ pub fn iterate(
     let (mut shared, mut eta) = pack(&model, &lay);
     let mut basis = Basis::new(&model, &lay, &data.omega);
     let norm = 1.0 / (2.0 * data.n as f64);
-    let mut c = cost(data, &lay, &basis, &eta, None);
+    let ng = groups(&model, &lay);
+    let mut c = cost(data, &lay, &basis, &eta, None, &ng);
     if !c.is_finite() {
         return Err(RivError::Numerical {
             what: "initial cost".into(),
@@ -206,7 +207,7 @@ pub fn iterate(
             let mut trial = model.clone();
             unpack(&mut trial, &lay, &s_new, &e_new);
             let b_new = Basis::new(&trial, &lay, &data.omega);
-            let c_new = cost(data, &lay, &b_new, &e_new, None);
+            let c_new = cost(data, &lay, &b_new, &e_new, None, &ng);
             let ok = c_new.is_finite() && (!cfg.backtracking || c_new <= c * (1.0 + 1e-10));
             if ok {
                 accepted = Some((s_new, e_new, trial, b_new, c_new));
@@ -229,7 +230,7 @@ pub fn iterate(
                 let mut trial = model.clone();
                 unpack(&mut trial, &lay, &s_new, &e_new);
                 let b_new = Basis::new(&trial, &lay, &data.omega);
-                let c_new = cost(data, &lay, &b_new, &e_new, None);
+                let c_new = cost(data, &lay, &b_new, &e_new, None, &ng);
                 if !c_new.is_finite() {
                     convergence = Convergence::Failed {
                         reason: format!("the cost became non-finite at iteration {it}"),

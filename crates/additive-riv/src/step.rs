@@ -21,12 +21,11 @@
 //! and the numerators follow by back-substitution. One step costs
 //! `O(lines * entries * (n_num + n_shared)^2)`: linear in lines and in `ny nu`.
 
-use crate::problem::{Basis, FitData, Layout};
+use crate::problem::{Basis, EntryLines, FitData, Layout};
 use crate::small::{lu_solve, spd_solve};
 use crate::RivError;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
-use frf_data::C64;
 use rayon::prelude::*;
 
 /// Which matrix multiplies the residual: the refined instrument (eq. 12) or the
@@ -66,108 +65,113 @@ pub struct StepUpdate {
     pub cond_numerator: f64,
 }
 
-/// Fills the transposed real instrument `Yt = [U | V_hat]^T` and regressor
-/// `Xt = [U | V | eps]^T` of entry `e`: column `k` holds the real parts of line `k`,
-/// column `n + k` the imaginary parts, all scaled by `sqrt(w)`. Storing the transposes
-/// keeps every write of a line contiguous. `yt` and `xt` must be `(nn + ns) x 2n` and
-/// `(nn + ns + 1) x 2n`.
-#[allow(clippy::too_many_arguments)]
+/// Fills the real instrument `Y = [U | V_hat]` and regressor `X = [U | V | eps]` of
+/// entry `e` (rows `k`: real parts of line `k`; rows `n + k`: imaginary parts; every
+/// row scaled by `s = sqrt(w) |F|`), column by column so that each loop runs over
+/// contiguous lines. `y` and `x` must be `2n x (nn + ns)` and `2n x (nn + ns + 1)`;
+/// `el` holds the entry's lines after [`EntryLines::fill`].
 fn fill_entry(
-    e: usize,
     data: &FitData,
     lay: &Layout,
-    sub_den: &[(usize, usize, usize, usize)],
+    den_groups: &[(usize, usize)],
     basis: &Basis,
-    eta: &[f64],
+    el: &EntryLines,
     method: IvMethod,
-    yt: &mut Mat<f64>,
-    xt: &mut Mat<f64>,
-    psub: &mut Vec<C64>,
+    y: &mut Mat<f64>,
+    x: &mut Mat<f64>,
 ) {
     let n = data.n;
-    let m = data.m();
     let nn = lay.n_num;
     let nd = lay.n_den;
     let ns = lay.n_shared();
-    let be = &eta[e * nn..(e + 1) * nn];
-    let mut col_re = vec![C64::new(0.0, 0.0); nn + ns + 1];
-    let mut inst = vec![C64::new(0.0, 0.0); nn + ns];
-    for k in 0..n {
-        let sw = (data.w[k * m + e]).sqrt() * basis.f_abs[k];
-        let uk = &basis.u[k * nn..(k + 1) * nn];
-        // submodel responses P_i and the total
-        psub.clear();
-        let mut p = C64::new(0.0, 0.0);
-        for &(num_off, n_num, _, _) in sub_den {
-            let mut pi = C64::new(0.0, 0.0);
-            for j in num_off..num_off + n_num {
-                pi += uk[j] * be[j];
+    let s = &el.s;
+    // numerator columns: u * s (instrument = regressor)
+    for j in 0..nn {
+        let ur = &basis.u_re[j * n..(j + 1) * n];
+        let ui = &basis.u_im[j * n..(j + 1) * n];
+        let col = y.col_as_slice_mut(j);
+        let (cr, ci) = col.split_at_mut(n);
+        for k in 0..n {
+            cr[k] = ur[k] * s[k];
+            ci[k] = ui[k] * s[k];
+        }
+        x.col_as_slice_mut(j).copy_from_slice(y.col_as_slice(j));
+    }
+    // denominator columns: d * P_i (instrument) and d * (E + P_i) (regressor)
+    for (i, &(d0, cnt)) in den_groups.iter().enumerate() {
+        let pr = &el.p_re[i * n..(i + 1) * n];
+        let pi = &el.p_im[i * n..(i + 1) * n];
+        for d in d0..d0 + cnt {
+            let dr = &basis.d_re[d * n..(d + 1) * n];
+            let di = &basis.d_im[d * n..(d + 1) * n];
+            {
+                let col = x.col_as_slice_mut(nn + d);
+                let (cr, ci) = col.split_at_mut(n);
+                for k in 0..n {
+                    let gr = (el.e_re[k] + pr[k]) * s[k];
+                    let gi = (el.e_im[k] + pi[k]) * s[k];
+                    cr[k] = dr[k] * gr - di[k] * gi;
+                    ci[k] = dr[k] * gi + di[k] * gr;
+                }
             }
-            psub.push(pi);
-            p += pi;
-        }
-        // data divided by the known factor; residual of the divided problem
-        let yk = data.g[k * m + e] * basis.f_inv[k];
-        let err = yk - p;
-        // numerator columns (instrument = regressor)
-        for (j, &ukj) in uk.iter().enumerate() {
-            let v = ukj * sw;
-            col_re[j] = v;
-            inst[j] = v;
-        }
-        // denominator columns: dcol * P_i (instrument) and dcol * (E + P_i) (regressor)
-        let dk = &basis.dcol[k * nd..(k + 1) * nd];
-        for (si, &(_, _, den_off, n_den)) in sub_den.iter().enumerate() {
-            let pi = psub[si] * sw;
-            let gi = (err + psub[si]) * sw;
-            let ip = if method == IvMethod::Riv { pi } else { gi };
-            for d in den_off..den_off + n_den {
-                inst[nn + d] = dk[d] * ip;
-                col_re[nn + d] = dk[d] * gi;
-            }
-        }
-        if lay.fit_delay {
-            // d(G/F - P)/d tau = j w G/F: regressor -j w y, instrument -j w P
-            let jw = C64::new(0.0, data.omega[k]) * sw;
-            inst[nn + nd] = -jw * if method == IvMethod::Riv { p } else { yk };
-            col_re[nn + nd] = -jw * yk;
-        }
-        col_re[nn + ns] = err * sw;
-        {
-            let c = yt.col_as_slice_mut(k);
-            for (dst, v) in c.iter_mut().zip(&inst) {
-                *dst = v.re;
-            }
-        }
-        {
-            let c = yt.col_as_slice_mut(n + k);
-            for (dst, v) in c.iter_mut().zip(&inst) {
-                *dst = v.im;
-            }
-        }
-        {
-            let c = xt.col_as_slice_mut(k);
-            for (dst, v) in c.iter_mut().zip(&col_re) {
-                *dst = v.re;
-            }
-        }
-        {
-            let c = xt.col_as_slice_mut(n + k);
-            for (dst, v) in c.iter_mut().zip(&col_re) {
-                *dst = v.im;
+            // SK: the instrument is the regressor itself (Remark 1)
+            let with_e = if method == IvMethod::Riv { 0.0 } else { 1.0 };
+            let col = y.col_as_slice_mut(nn + d);
+            let (cr, ci) = col.split_at_mut(n);
+            for k in 0..n {
+                let qr = (with_e * el.e_re[k] + pr[k]) * s[k];
+                let qi = (with_e * el.e_im[k] + pi[k]) * s[k];
+                cr[k] = dr[k] * qr - di[k] * qi;
+                ci[k] = dr[k] * qi + di[k] * qr;
             }
         }
     }
+    if lay.fit_delay {
+        // d(G/F - P)/d tau = j w y: regressor -j w y, instrument -j w P (SK: -j w y)
+        {
+            let col = x.col_as_slice_mut(nn + nd);
+            let (cr, ci) = col.split_at_mut(n);
+            for k in 0..n {
+                let w = data.omega[k] * s[k];
+                cr[k] = w * el.y_im[k];
+                ci[k] = -w * el.y_re[k];
+            }
+        }
+        let col = y.col_as_slice_mut(nn + nd);
+        let (cr, ci) = col.split_at_mut(n);
+        for k in 0..n {
+            let w = data.omega[k] * s[k];
+            let (pr, pi) = if method == IvMethod::Riv {
+                (el.y_re[k] - el.e_re[k], el.y_im[k] - el.e_im[k])
+            } else {
+                (el.y_re[k], el.y_im[k])
+            };
+            cr[k] = w * pi;
+            ci[k] = -w * pr;
+        }
+    }
+    let col = x.col_as_slice_mut(nn + ns);
+    let (cr, ci) = col.split_at_mut(n);
+    for k in 0..n {
+        cr[k] = el.e_re[k] * s[k];
+        ci[k] = el.e_im[k] * s[k];
+    }
 }
 
-fn submodel_table(
-    lay: &Layout,
-    model_subs: &[(usize, usize)],
-) -> Vec<(usize, usize, usize, usize)> {
+/// `(first denominator index, count)` per submodel.
+fn den_groups(model_subs: &[(usize, usize)], lay: &Layout) -> Vec<(usize, usize)> {
     model_subs
         .iter()
         .enumerate()
-        .map(|(i, &(n_num, n_den))| (lay.num_offset[i], n_num, lay.den_offset[i], n_den))
+        .map(|(i, &(_, n_den))| (lay.den_offset[i], n_den))
+        .collect()
+}
+
+fn num_groups(model_subs: &[(usize, usize)], lay: &Layout) -> Vec<(usize, usize)> {
+    model_subs
+        .iter()
+        .enumerate()
+        .map(|(i, &(n_num, _))| (lay.num_offset[i], n_num))
         .collect()
 }
 
@@ -216,18 +220,20 @@ fn step_structured(
     let m = data.m();
     let nn = lay.n_num;
     let ns = lay.n_shared();
-    let table = submodel_table(lay, subs);
+    let ng = num_groups(subs, lay);
+    let dg = den_groups(subs, lay);
     let per_entry = |e: usize,
-                     bufs: &mut (Mat<f64>, Mat<f64>, Mat<f64>, Vec<C64>)|
+                     bufs: &mut (Mat<f64>, Mat<f64>, Mat<f64>, EntryLines)|
      -> Result<EntryParts, RivError> {
-        let (yt, xt, z, psub) = bufs;
-        fill_entry(e, data, lay, &table, basis, eta, method, yt, xt, psub);
-        // Z = Y^T X = Yt Xt^T : (nn + ns) x (nn + ns + 1)
+        let (y, x, z, el) = bufs;
+        el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
+        fill_entry(data, lay, &dg, basis, el, method, y, x);
+        // Z = Y^T X : (nn + ns) x (nn + ns + 1)
         matmul(
             z.as_mut(),
             Accum::Replace,
-            yt.as_ref(),
-            xt.transpose(),
+            y.transpose(),
+            x.as_ref(),
             1.0,
             Par::Seq,
         );
@@ -288,10 +294,10 @@ fn step_structured(
     };
     let init = || {
         (
-            Mat::<f64>::zeros(nn + ns, 2 * n),
-            Mat::<f64>::zeros(nn + ns + 1, 2 * n),
+            Mat::<f64>::zeros(2 * n, nn + ns),
+            Mat::<f64>::zeros(2 * n, nn + ns + 1),
             Mat::<f64>::zeros(nn + ns, nn + ns + 1),
-            Vec::with_capacity(subs.len()),
+            EntryLines::default(),
         )
     };
     let parts: Vec<EntryParts> = if parallel && m > 1 {
@@ -363,28 +369,28 @@ fn step_dense(
     let nn = lay.n_num;
     let ns = lay.n_shared();
     let ptot = ns + m * nn;
-    let table = submodel_table(lay, subs);
+    let ng = num_groups(subs, lay);
+    let dg = den_groups(subs, lay);
     // Full instrument and regressor: rows 2n per entry, columns [shared | eta_0 | ..].
     let mut yf = Mat::<f64>::zeros(2 * n * m, ptot);
     let mut xf = Mat::<f64>::zeros(2 * n * m, ptot + 1);
-    let mut yt = Mat::<f64>::zeros(nn + ns, 2 * n);
-    let mut xt = Mat::<f64>::zeros(nn + ns + 1, 2 * n);
-    let mut psub = Vec::new();
+    let mut y = Mat::<f64>::zeros(2 * n, nn + ns);
+    let mut x = Mat::<f64>::zeros(2 * n, nn + ns + 1);
+    let mut el = EntryLines::default();
     for e in 0..m {
-        fill_entry(
-            e, data, lay, &table, basis, eta, method, &mut yt, &mut xt, &mut psub,
-        );
+        el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
+        fill_entry(data, lay, &dg, basis, &el, method, &mut y, &mut x);
         for row in 0..2 * n {
             let rr = e * 2 * n + row;
             for c in 0..ns {
-                yf[(rr, c)] = yt[(nn + c, row)];
-                xf[(rr, c)] = xt[(nn + c, row)];
+                yf[(rr, c)] = y[(row, nn + c)];
+                xf[(rr, c)] = x[(row, nn + c)];
             }
             for t in 0..nn {
-                yf[(rr, ns + e * nn + t)] = yt[(t, row)];
-                xf[(rr, ns + e * nn + t)] = xt[(t, row)];
+                yf[(rr, ns + e * nn + t)] = y[(row, t)];
+                xf[(rr, ns + e * nn + t)] = x[(row, t)];
             }
-            xf[(rr, ptot)] = xt[(nn + ns, row)];
+            xf[(rr, ptot)] = x[(row, nn + ns)];
         }
     }
     let mut z = Mat::<f64>::zeros(ptot, ptot + 1);

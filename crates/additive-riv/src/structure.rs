@@ -10,7 +10,7 @@
 //! freedom. A peak must exceed the Bonferroni-corrected quantile over all lines. A mode
 //! is kept only when the F statistic of its parameters passes at significance `alpha`.
 
-use crate::problem::{cost, pack, Basis, FitData, Layout};
+use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
 use crate::riv::{iterate, RivConfig};
 use crate::significance::{chi2_upper, f_statistic, noise_scale, submodel_cost_increase};
 use crate::{fit_numerators, AdditiveModel, RivError, SubmodelKind};
@@ -95,7 +95,14 @@ impl ResidualStats {
         let basis = Basis::new(model, &lay, &data.omega);
         let (_, eta) = pack(model, &lay);
         let mut resid = Vec::new();
-        let v = cost(data, &lay, &basis, &eta, Some(&mut resid));
+        let v = cost(
+            data,
+            &lay,
+            &basis,
+            &eta,
+            Some(&mut resid),
+            &groups(model, &lay),
+        );
         let s2 = noise_scale(v, data, model.n_params());
         let m = data.m();
         let t: Vec<f64> = (0..data.n)
@@ -119,7 +126,11 @@ impl ResidualStats {
         } else {
             nu_max
         };
-        let c = if med > 0.0 { med / (nu - 2.0 / 3.0).max(0.5) } else { 1.0 };
+        let c = if med > 0.0 {
+            med / (nu - 2.0 / 3.0).max(0.5)
+        } else {
+            1.0
+        };
         Self { t, nu, c, s2 }
     }
 
@@ -174,7 +185,11 @@ pub fn residual_peaks(
 fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
     let w = TAU * f_hz;
     let k = data.omega.partition_point(|&x| x < w).min(data.n - 1);
-    let (a, b) = if k == 0 { (0, 1.min(data.n - 1)) } else { (k - 1, k) };
+    let (a, b) = if k == 0 {
+        (0, 1.min(data.n - 1))
+    } else {
+        (k - 1, k)
+    };
     if a == b {
         return f64::INFINITY;
     }
@@ -248,8 +263,16 @@ fn drop_pass(
             };
             let bw = 0.5 * (pa.re.abs() + pb.re.abs());
             if (pa - pb).norm() < 0.5 * bw {
-                let (keep, go) = if pa.re.abs() <= pb.re.abs() { (a, b) } else { (b, a) };
-                let (keep, go) = if protect.contains(&go) { (go, keep) } else { (keep, go) };
+                let (keep, go) = if pa.re.abs() <= pb.re.abs() {
+                    (a, b)
+                } else {
+                    (b, a)
+                };
+                let (keep, go) = if protect.contains(&go) {
+                    (go, keep)
+                } else {
+                    (keep, go)
+                };
                 if !protect.contains(&go) {
                     remove.push((
                         go,
@@ -260,8 +283,12 @@ fn drop_pass(
         }
     }
     // 2. significance of what is left
-    let mut stats: Vec<(f64, f64)> = (0..n_sub).map(|i| (mode_f_hz(model, i), f64::NAN)).collect();
-    let kept: Vec<usize> = (0..n_sub).filter(|i| !remove.iter().any(|(r, _)| r == i)).collect();
+    let mut stats: Vec<(f64, f64)> = (0..n_sub)
+        .map(|i| (mode_f_hz(model, i), f64::NAN))
+        .collect();
+    let kept: Vec<usize> = (0..n_sub)
+        .filter(|i| !remove.iter().any(|(r, _)| r == i))
+        .collect();
     let mut trial = model.clone();
     trial.submodels = kept.iter().map(|&i| model.submodels[i].clone()).collect();
     if !remove.is_empty() {
@@ -313,7 +340,9 @@ pub fn adapt_modes(
         // 1. remove what does not belong
         let (dropped, _) = drop_pass(&mut model, data, cfg, &[])?;
         let mut changed = !dropped.is_empty();
-        report.dropped.extend(dropped.into_iter().map(|(_, f, why)| (f, why)));
+        report
+            .dropped
+            .extend(dropped.into_iter().map(|(_, f, why)| (f, why)));
         // 2. add modes at residual peaks
         let n_old = model.submodels.len();
         let (lo, hi) = data.band_hz;
@@ -364,9 +393,11 @@ pub fn adapt_modes(
     // the last refinement's own warnings, plus the structure changes
     for (f, why) in &report.dropped {
         if f.is_finite() {
-            fit.messages.push(format!("removed mode at {f:.2} Hz: {why}"));
+            fit.messages
+                .push(format!("removed mode at {f:.2} Hz: {why}"));
         } else {
-            fit.messages.push(format!("removed a candidate mode: {why}"));
+            fit.messages
+                .push(format!("removed a candidate mode: {why}"));
         }
     }
     for (f, fs) in &report.added {
