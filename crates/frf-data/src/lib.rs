@@ -11,7 +11,9 @@
 //! - simulated experiments (`synth`) and nonparametric FRF estimation from periodic data
 //!   (`nonparametric`).
 
+pub mod cmif;
 pub mod dataset;
+pub mod delay;
 pub mod error;
 pub mod estimator;
 pub mod frf;

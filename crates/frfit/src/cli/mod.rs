@@ -4,6 +4,10 @@
 use clap::{Parser, Subcommand};
 use frfit::FrfitError;
 
+pub mod cmif;
+pub mod common;
+pub mod info;
+
 #[derive(Parser, Debug)]
 #[command(
     name = "frfit",
@@ -20,10 +24,18 @@ pub struct Cli {
 }
 
 #[derive(Subcommand, Debug)]
-pub enum Command {}
+pub enum Command {
+    /// Summarise an FRF file: dimensions, band, lines, units, variance and noise level.
+    Info(info::Args),
+    /// Complex mode indicator function: singular values per line and the picked modes.
+    Cmif(cmif::Args),
+}
 
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> Result<(), FrfitError> {
-    let _quiet = cli.quiet;
-    match cli.command {}
+    let quiet = cli.quiet;
+    match cli.command {
+        Command::Info(a) => info::run(a, quiet),
+        Command::Cmif(a) => cmif::run(a, quiet),
+    }
 }
