@@ -18,8 +18,10 @@
 //!   insignificant ones, so that a plain fit holds every mode the data show.
 
 pub mod error;
+pub mod fitter;
 pub mod init;
 pub mod model;
+pub mod model_json;
 
 pub use error::RivError;
 pub use model::{AdditiveModel, Domain, KnownFactor, ModeInfo, Submodel, SubmodelKind};
@@ -31,7 +33,9 @@ pub mod small;
 pub mod step;
 pub mod structure;
 
+pub use fitter::{AdditiveFitter, DelayChoice, FitterConfig, FitterReport, Hold, ModeSelection};
 pub use init::{initial_model, InitConfig, RigidBody};
+pub use model_json::{ModelFile, Provenance};
 pub use numerators::fit_numerators;
 pub use problem::FitData;
 pub use riv::{AdditiveRiv, RivConfig};

@@ -71,6 +71,11 @@ pub struct Submodel {
     pub num: Vec<Mat<f64>>,
     /// `sigma` (rad/s) with `x = s / sigma` (continuous); 1 in discrete time.
     pub scale: f64,
+    /// A fixed polynomial factor `c(x)` (ascending coefficients) of the numerator:
+    /// the submodel is `c(x) sum_r B~_r x^r / (x^l A(x))`. `[1]` when there is none; the
+    /// exact-hold rigid body uses it so that its single numerator matrix is the
+    /// continuous-time residue (`zoh(B/s^2) = B ts^2/2 (q + q^2) / (1 - q)^2`).
+    pub num_poly: Vec<f64>,
 }
 
 impl Submodel {
@@ -82,6 +87,50 @@ impl Submodel {
     pub fn n_num(&self) -> usize {
         self.num.len()
     }
+    /// `c(x)`, the fixed numerator factor, at `x`.
+    #[inline]
+    pub fn num_poly_at(&self, x: C64) -> C64 {
+        let mut acc = C64::new(0.0, 0.0);
+        for &c in self.num_poly.iter().rev() {
+            acc = acc * x + c;
+        }
+        acc
+    }
+
+    /// The same submodel with the fixed factor multiplied into the numerator
+    /// (`num_poly = [1]`, `num_start = 0`).
+    pub fn expanded(&self) -> Submodel {
+        if self.num_poly == [1.0] && self.num_start == 0 {
+            return self.clone();
+        }
+        let (ny, nu) = (self.num[0].nrows(), self.num[0].ncols());
+        let deg = self.num_start + self.num.len() - 1 + self.num_poly.len() - 1;
+        let mut num = vec![Mat::<f64>::zeros(ny, nu); deg + 1];
+        for (t, b) in self.num.iter().enumerate() {
+            for (sdx, &c) in self.num_poly.iter().enumerate() {
+                let p = self.num_start + t + sdx;
+                for j in 0..nu {
+                    for i in 0..ny {
+                        num[p][(i, j)] += c * b[(i, j)];
+                    }
+                }
+            }
+        }
+        // drop leading zero coefficients (keep the power offset)
+        let first = num
+            .iter()
+            .position(|b| (0..nu).any(|j| (0..ny).any(|i| b[(i, j)] != 0.0)))
+            .unwrap_or(0);
+        let num_start = first;
+        let num: Vec<Mat<f64>> = num.into_iter().skip(first).collect();
+        Submodel {
+            num_start,
+            num,
+            num_poly: vec![1.0],
+            ..self.clone()
+        }
+    }
+
     /// `A(x)` at the complex point `x`.
     #[inline]
     pub fn den_at(&self, x: C64) -> C64 {
@@ -246,22 +295,29 @@ impl AdditiveModel {
                 "at most one submodel may have poles at the origin (eq. 2)".into(),
             ));
         }
-        let (num_start, n_num, scale) = match self.domain {
-            Domain::Continuous => (0, 1, check_scale(scale)?),
-            Domain::ZohDiscrete { .. } => (1, integrators, 1.0),
+        // Continuous: B / s^l. Exact hold: the ZOH image of B / s^l, whose numerator
+        // shape is fixed (ts q for l = 1, ts^2/2 (q + q^2) for l = 2), so that B is the
+        // continuous residue as well.
+        let (num_poly, scale) = match self.domain {
+            Domain::Continuous => (vec![1.0], check_scale(scale)?),
+            Domain::ZohDiscrete { ts } => match integrators {
+                1 => (vec![0.0, ts], 1.0),
+                2 => (vec![0.0, ts * ts / 2.0, ts * ts / 2.0], 1.0),
+                _ => {
+                    return Err(RivError::Structure(
+                        "the exact-hold model supports at most 2 integrators".into(),
+                    ))
+                }
+            },
         };
-        if matches!(self.domain, Domain::ZohDiscrete { .. }) && integrators > 2 {
-            return Err(RivError::Structure(
-                "the exact-hold model supports at most 2 integrators".into(),
-            ));
-        }
         self.submodels.push(Submodel {
             kind: SubmodelKind::RigidBody,
             integrators,
             den: Vec::new(),
-            num_start,
-            num: vec![Mat::zeros(self.ny, self.nu); n_num],
+            num_start: 0,
+            num: vec![Mat::zeros(self.ny, self.nu)],
             scale,
+            num_poly,
         });
         Ok(self.submodels.len() - 1)
     }
@@ -292,6 +348,7 @@ impl AdditiveModel {
                 num_start: 0,
                 num: vec![Mat::zeros(self.ny, self.nu); if first_order_numerator { 2 } else { 1 }],
                 scale: wn,
+                num_poly: vec![1.0],
             },
             Domain::ZohDiscrete { ts } => {
                 if wn * ts >= PI {
@@ -310,6 +367,7 @@ impl AdditiveModel {
                     num_start: 1,
                     num: vec![Mat::zeros(self.ny, self.nu); 2],
                     scale: 1.0,
+                    num_poly: vec![1.0],
                 }
             }
         };
@@ -335,6 +393,7 @@ impl AdditiveModel {
             num_start: 0,
             num: vec![Mat::zeros(self.ny, self.nu)],
             scale: 1.0,
+            num_poly: vec![1.0],
         });
         Ok(self.submodels.len() - 1)
     }
@@ -353,6 +412,11 @@ impl AdditiveModel {
         }
         if sub.num.is_empty() {
             return Err(RivError::Structure("a submodel needs a numerator".into()));
+        }
+        if sub.num_poly.is_empty() || sub.num_poly.iter().any(|c| !c.is_finite()) {
+            return Err(RivError::Structure(
+                "the fixed numerator factor must be a non-empty finite polynomial".into(),
+            ));
         }
         if sub.integrators > 0 && self.submodels.iter().any(|s| s.integrators > 0) {
             return Err(RivError::Structure(
@@ -398,7 +462,7 @@ impl AdditiveModel {
     #[inline]
     pub fn basis_into(&self, sub: &Submodel, omega: f64, out: &mut Vec<C64>) {
         let x = self.variable(sub, omega);
-        let d = (self.integrator_factor(sub.integrators, x) * sub.den_at(x)).inv();
+        let d = sub.num_poly_at(x) / (self.integrator_factor(sub.integrators, x) * sub.den_at(x));
         let mut xr = x.powi(sub.num_start as i32);
         for _ in 0..sub.num.len() {
             out.push(xr * d);
@@ -514,6 +578,7 @@ impl AdditiveModel {
     pub fn to_modal_model(&self) -> Result<ModalModel, RivError> {
         let mut mm = ModalModel::new(self.ny, self.nu);
         for (idx, sub) in self.submodels.iter().enumerate() {
+            let sub = &sub.expanded();
             match self.domain {
                 Domain::Continuous => self.continuous_partial_fractions(sub, &mut mm),
                 Domain::ZohDiscrete { ts } => self.discrete_partial_fractions(sub, ts, &mut mm),

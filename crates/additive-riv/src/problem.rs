@@ -265,7 +265,7 @@ impl Basis {
             for (i, s) in model.submodels.iter().enumerate() {
                 let x = model.variable(s, w);
                 let a = s.den_at(x);
-                let pa = (model.integrator_factor(s.integrators, x) * a).inv();
+                let pa = s.num_poly_at(x) / (model.integrator_factor(s.integrators, x) * a);
                 let mut xr = x.powi(s.num_start as i32);
                 for t in 0..s.num.len() {
                     let v = xr * pa;

@@ -26,10 +26,17 @@ pub struct AdaptConfig {
     pub alpha: f64,
     /// At most this many modes added per round. Default: 6.
     pub max_new_per_round: usize,
-    /// Candidate peaks closer than this relative distance are one candidate. Default: 0.004.
+    /// Candidate peaks closer than this relative distance are one candidate (the
+    /// strongest): a merged close pair leaves residual peaks on both sides of the fitted
+    /// mode, and one new mode per round resolves it. Default: 0.025.
     pub min_separation: f64,
     /// Damping of an added mode. Default: 0.01.
     pub zeta0: f64,
+    /// Relative parameter tolerance of the refinements between structure changes (the
+    /// last refinement uses the full tolerance of the RIV settings). Default: 1e-6.
+    pub coarse_tol: f64,
+    /// Iteration limit of the refinements between structure changes. Default: 15.
+    pub coarse_max_iterations: usize,
     /// Practical-significance floor: a mode is added or kept only when its F statistic
     /// (the cost its parameters explain, in units of what they would absorb of pure
     /// noise) is at least this, on top of the F test at `alpha`. Measured FRF noise is
@@ -48,9 +55,11 @@ impl Default for AdaptConfig {
             max_rounds: 3,
             alpha: 1e-3,
             max_new_per_round: 6,
-            min_separation: 0.004,
+            min_separation: 0.025,
             zeta0: 0.01,
             min_f: 25.0,
+            coarse_tol: 1e-6,
+            coarse_max_iterations: 15,
             band_margin: 1.25,
         }
     }
@@ -65,6 +74,8 @@ pub struct AdaptReport {
     pub dropped: Vec<(f64, String)>,
     /// Rounds run.
     pub rounds: usize,
+    /// Iterations of each refinement, in order.
+    pub refinements: Vec<usize>,
 }
 
 /// The per-line statistic `2 T_k / s^2` of the weighted residual and its fitted null
@@ -135,13 +146,24 @@ impl ResidualStats {
     }
 
     /// The threshold the statistic exceeds with probability `alpha` under the fitted
-    /// null, but at least three times the statistic's 99th percentile over the lines
-    /// (the tail of measured FRF noise is heavier than any chi-square fitted to its bulk).
+    /// null distribution.
     pub fn threshold(&self, alpha: f64) -> f64 {
-        let mut s = self.t.clone();
-        s.sort_by(|a, b| a.total_cmp(b));
-        let p99 = s[((s.len() as f64) * 0.99) as usize].max(0.0);
-        (self.c * chi2_upper(self.nu, alpha)).max(3.0 * p99)
+        self.c * chi2_upper(self.nu, alpha)
+    }
+
+    /// The local level of the statistic around line `k`: its median over the lines within
+    /// `rel` (relative frequency) of line `k`, at least 10 lines each side.
+    pub fn local_median(&self, omega: &[f64], k: usize, rel: f64) -> f64 {
+        let n = self.t.len();
+        let lo_w = omega[k] * (1.0 - rel);
+        let hi_w = omega[k] * (1.0 + rel);
+        let a = omega
+            .partition_point(|&w| w < lo_w)
+            .min(k.saturating_sub(10));
+        let b = omega.partition_point(|&w| w <= hi_w).max((k + 11).min(n));
+        let mut win: Vec<f64> = self.t[a..b].to_vec();
+        win.sort_by(|x, y| x.total_cmp(y));
+        win[win.len() / 2]
     }
 
     /// The effective number of independent parameters among `p` entry-wise parameters of
@@ -152,8 +174,11 @@ impl ResidualStats {
 }
 
 /// Candidate frequencies (Hz) of missed modes: local maxima of the per-line weighted
-/// residual statistic ([`ResidualStats`]) above its Bonferroni-corrected threshold,
-/// strongest first, with the value of the statistic relative to the threshold.
+/// residual statistic ([`ResidualStats`]) that exceed both its Bonferroni-corrected
+/// threshold and [`PEAK_OVER_LOCAL`] times its local median (within +-10 % in
+/// frequency), strongest first, with the ratio to the larger of the two. The local test
+/// keeps a broadband misfit (a delay, a hold) from being taken for modes, and measured
+/// noise, whose peaks reach about 3 times the local median, from being fitted.
 pub fn residual_peaks(
     stats: &ResidualStats,
     data: &FitData,
@@ -173,13 +198,20 @@ pub fn residual_peaks(
             let fj = data.omega[j] / TAU;
             (fj - f).abs() > min_separation * f || t[j] <= t[k]
         });
-        if is_max {
-            peaks.push((f, t[k] / thr));
+        if !is_max {
+            continue;
+        }
+        let level = thr.max(PEAK_OVER_LOCAL * stats.local_median(&data.omega, k, 0.1));
+        if t[k] > level {
+            peaks.push((f, t[k] / level));
         }
     }
     peaks.sort_by(|a, b| b.1.total_cmp(&a.1));
     peaks
 }
+
+/// How far above its local median a residual peak must rise to be a mode candidate.
+pub const PEAK_OVER_LOCAL: f64 = 10.0;
 
 /// Line spacing of the data near `f_hz` (Hz).
 fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
@@ -331,7 +363,16 @@ pub fn adapt_modes(
     cfg: &AdaptConfig,
 ) -> Result<(Fit<AdditiveModel>, AdaptReport), RivError> {
     let mut report = AdaptReport::default();
-    let mut fit = iterate(start, data, riv)?;
+    // Refinements between structure changes only need to settle the poles well enough
+    // for the tests; the last one converges to the full tolerance.
+    let coarse = RivConfig {
+        param_tol: riv.param_tol.max(cfg.coarse_tol),
+        cost_tol: riv.cost_tol.max(cfg.coarse_tol * 1e-2),
+        max_iterations: riv.max_iterations.min(cfg.coarse_max_iterations),
+        ..riv.clone()
+    };
+    let mut fit = iterate(start, data, &coarse)?;
+    report.refinements.push(fit.iterations);
     let mut total_iterations = fit.iterations;
     let mut history = fit.cost_history.clone();
     for round in 0..cfg.max_rounds {
@@ -361,7 +402,8 @@ pub fn adapt_modes(
         }
         changed |= !added.is_empty();
         fit_numerators(&mut model, data)?;
-        let mut refit = iterate(model, data, riv)?;
+        let mut refit = iterate(model, data, &coarse)?;
+        report.refinements.push(refit.iterations);
         total_iterations += refit.iterations;
         history.extend_from_slice(&refit.cost_history);
         // 3. keep only the added modes that are significant
@@ -375,12 +417,12 @@ pub fn adapt_modes(
                 }
             }
             if !dropped_new.is_empty() {
+                // the numerators were refitted without them; the next round (or the
+                // final refinement) settles the poles
                 report
                     .dropped
                     .extend(dropped_new.into_iter().map(|(_, f, why)| (f, why)));
-                refit = iterate(model, data, riv)?;
-                total_iterations += refit.iterations;
-                history.extend_from_slice(&refit.cost_history);
+                refit.model = model;
             }
         }
         fit = refit;
@@ -388,6 +430,12 @@ pub fn adapt_modes(
             break;
         }
     }
+    // converge fully from the last structure
+    let last = iterate(fit.model, data, riv)?;
+    report.refinements.push(last.iterations);
+    total_iterations += last.iterations;
+    history.extend_from_slice(&last.cost_history);
+    fit = last;
     fit.iterations = total_iterations;
     fit.cost_history = history;
     // the last refinement's own warnings, plus the structure changes

@@ -1,0 +1,396 @@
+//! [`AdditiveFitter`]: the whole method as one [`Estimator`]: delay, CMIF mode picking,
+//! rigid-body detection, the initialisation of section 3.3/4.4, the RIV iterations of
+//! Algorithm 1 and the adaptation of the set of modes.
+
+use crate::init::{initial_model, InitConfig, RigidBody};
+use crate::riv::{iterate, RivConfig};
+use crate::significance::{f_critical, f_statistic, noise_scale};
+use crate::structure::{adapt_modes, AdaptConfig, AdaptReport};
+use crate::{AdditiveModel, Domain, FitData, KnownFactor, RivError};
+use frf_data::cmif::{cmif, pick_peaks, CmifPeak, PeakConfig};
+use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
+use frf_data::{Estimator, Fit, FrfDataset, ModelStructure, ProgressSink};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Which modes to start from.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModeSelection {
+    /// Every peak the CMIF picker accepts (the default).
+    #[default]
+    Auto,
+    /// The `n` most prominent CMIF peaks (the user declares how many modes to expect).
+    Count(usize),
+    /// These frequencies (Hz), e.g. from a finite-element model.
+    Frequencies(Vec<f64>),
+}
+
+/// How the sampled measurement is modelled.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Hold {
+    /// A continuous-time model (with the delay as a known factor): the paper's
+    /// delay-compensated fit. The default.
+    #[default]
+    None,
+    /// The exact zero-order hold at sample rate `fs_hz`: the model is fitted as the
+    /// hold's image in the shift variable and mapped back to continuous time exactly.
+    Zoh {
+        /// Sample rate, Hz.
+        fs_hz: f64,
+    },
+    /// The hold's amplitude `sinc(w / 2 fs)` as a known factor on a continuous model
+    /// (its half-sample phase is part of the delay). An approximation of `Zoh`.
+    Sinc {
+        /// Sample rate, Hz.
+        fs_hz: f64,
+    },
+}
+
+/// How the input/output delay is handled.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum DelayChoice {
+    /// Estimated from the data (delay periodogram), then refined as a free parameter of
+    /// the iterations (the default). With the exact hold, the hold's half sample is
+    /// taken out of the estimate.
+    #[default]
+    Auto,
+    /// No delay.
+    None,
+    /// A known delay in seconds (the part not explained by a modelled hold), not refined.
+    Fixed {
+        /// Seconds.
+        seconds: f64,
+    },
+}
+
+/// Settings of [`AdditiveFitter`], with documented defaults.
+#[derive(Debug, Clone)]
+pub struct FitterConfig {
+    /// Modes to start from. Default: [`ModeSelection::Auto`].
+    pub modes: ModeSelection,
+    /// CMIF peak picker settings. Default: [`PeakConfig::default`].
+    pub peaks: PeakConfig,
+    /// Model of the sampled measurement. Default: [`Hold::None`].
+    pub hold: Hold,
+    /// Delay handling. Default: [`DelayChoice::Auto`].
+    pub delay: DelayChoice,
+    /// Delay estimator settings.
+    pub delay_config: DelayConfig,
+    /// `k` of `(j w)^k`: 0 displacement (default), 1 velocity, 2 accelerance data.
+    pub derivative_order: u32,
+    /// Rigid-body submodel. Default: [`RigidBody::Auto`] (chosen by comparing fits with
+    /// 0, 1 and 2 integrators).
+    pub rigid_body: RigidBody,
+    /// Add a feedthrough submodel. Default: false.
+    pub feedthrough: bool,
+    /// Initial damping of every mode (section 4.4). Default: 0.01.
+    pub zeta0: f64,
+    /// Iteration settings (method, weighting, tolerances).
+    pub riv: RivConfig,
+    /// Add/drop modes after the first refinement. Default: `Some(default)`; `None` runs
+    /// Algorithm 1 once on the CMIF initialisation.
+    pub adapt: Option<AdaptConfig>,
+    /// Progress callback (one report per stage and per iteration).
+    pub progress: ProgressSink,
+}
+
+impl Default for FitterConfig {
+    fn default() -> Self {
+        Self {
+            modes: ModeSelection::Auto,
+            peaks: PeakConfig::default(),
+            hold: Hold::None,
+            delay: DelayChoice::Auto,
+            delay_config: DelayConfig::default(),
+            derivative_order: 0,
+            rigid_body: RigidBody::Auto,
+            feedthrough: false,
+            zeta0: 0.01,
+            riv: RivConfig::default(),
+            adapt: Some(AdaptConfig::default()),
+            progress: ProgressSink::none(),
+        }
+    }
+}
+
+/// What the fitter found on the way, for reports.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct FitterReport {
+    /// The CMIF peaks the initialisation started from.
+    pub cmif_peaks: Vec<CmifPeak>,
+    /// The delay estimate, when the delay was estimated.
+    pub delay_estimate: Option<DelayEstimate>,
+    /// Integrators of the rigid-body submodel.
+    pub integrators: usize,
+    /// The weighting used.
+    pub weighting: String,
+    /// Cost (8) of the initialisation.
+    pub init_cost: f64,
+    /// Mode additions and removals.
+    pub adapt: Option<AdaptReport>,
+    /// Band fitted, Hz.
+    pub band_hz: (f64, f64),
+}
+
+/// The whole additive-RIV method as an initialiser-plus-refiner ([`Estimator`] with
+/// `Start = ()`): data in, `Fit<AdditiveModel>` out. The report of the last run is kept
+/// in the returned fit's messages; [`AdditiveFitter::fit`] also returns it structured.
+#[derive(Debug, Clone, Default)]
+pub struct AdditiveFitter {
+    /// Settings.
+    pub config: FitterConfig,
+}
+
+impl AdditiveFitter {
+    /// A fitter with the given settings.
+    pub fn new(config: FitterConfig) -> Self {
+        Self { config }
+    }
+
+    /// Runs the method on `data` (already restricted to the band to fit).
+    pub fn fit<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+    ) -> Result<(Fit<AdditiveModel>, FitterReport), RivError> {
+        let cfg = &self.config;
+        let t0 = Instant::now();
+        let mut timings = Vec::new();
+        let weighting = cfg.riv.weighting.resolve(data);
+        let fd = FitData::new(data, &weighting)?;
+        let mut report = FitterReport {
+            weighting: weighting.name().to_string(),
+            band_hz: fd.band_hz,
+            ..Default::default()
+        };
+        cfg.progress
+            .step("prepare", 1, Some(5), None, "data and weights");
+        // 1. delay and domain
+        let (domain, sinc) = match cfg.hold {
+            Hold::None => (Domain::Continuous, None),
+            Hold::Zoh { fs_hz } => {
+                check_fs(fs_hz, fd.band_hz.1)?;
+                (Domain::ZohDiscrete { ts: 1.0 / fs_hz }, None)
+            }
+            Hold::Sinc { fs_hz } => {
+                check_fs(fs_hz, fd.band_hz.1)?;
+                (Domain::Continuous, Some(fs_hz))
+            }
+        };
+        let (delay_s, fit_delay) = match cfg.delay {
+            DelayChoice::None => (0.0, false),
+            DelayChoice::Fixed { seconds } => (seconds, false),
+            DelayChoice::Auto => {
+                let t = Instant::now();
+                let est = estimate_delay(data, &cfg.delay_config)?;
+                timings.push(("delay", t.elapsed()));
+                let hold_share = match cfg.hold {
+                    Hold::Zoh { fs_hz } => 0.5 / fs_hz,
+                    _ => 0.0,
+                };
+                let tau = est.tau_s - hold_share;
+                report.delay_estimate = Some(est);
+                (tau, true)
+            }
+        };
+        let factor = KnownFactor {
+            delay_s,
+            fit_delay,
+            derivative_order: cfg.derivative_order,
+            sinc_hold_fs: sinc,
+        };
+        cfg.progress
+            .step("cmif", 2, Some(5), None, "mode indicator");
+        // 2. modes
+        let t = Instant::now();
+        let freqs: Vec<f64> = match &cfg.modes {
+            ModeSelection::Frequencies(f) => f.clone(),
+            sel => {
+                let c = cmif(data)?;
+                let mut pc = cfg.peaks.clone();
+                if let ModeSelection::Count(n) = sel {
+                    pc.n_modes = Some(*n);
+                }
+                let peaks = pick_peaks(&c, &pc);
+                let f = peaks.iter().map(|p| p.f_hz).collect();
+                report.cmif_peaks = peaks;
+                f
+            }
+        };
+        timings.push(("cmif", t.elapsed()));
+        // 3. initialisation (rigid body chosen by comparing fits when automatic)
+        let t = Instant::now();
+        let base = InitConfig {
+            domain,
+            factor,
+            rigid_body: cfg.rigid_body,
+            feedthrough: cfg.feedthrough,
+            zeta0: cfg.zeta0,
+            first_order_numerators: false,
+        };
+        let init = match cfg.rigid_body {
+            RigidBody::Auto => choose_rigid_body(&fd, &freqs, &base)?,
+            _ => initial_model(&fd, &freqs, &base)?,
+        };
+        report.integrators = init
+            .model
+            .submodels
+            .iter()
+            .map(|s| s.integrators)
+            .max()
+            .unwrap_or(0);
+        report.init_cost = init.final_cost().unwrap_or(f64::NAN);
+        timings.push(("init", t.elapsed()));
+        cfg.progress
+            .step("riv", 3, Some(5), None, "refined IV iterations");
+        // 4. refinement (and adaptation of the modes)
+        let t = Instant::now();
+        let mut riv = cfg.riv.clone();
+        riv.weighting = weighting.clone();
+        let mut fit = match &cfg.adapt {
+            Some(a) => {
+                let (f, rep) = adapt_modes(init.model, &fd, &riv, a)?;
+                report.adapt = Some(rep);
+                f
+            }
+            None => iterate(init.model, &fd, &riv)?,
+        };
+        timings.push(("refine", t.elapsed()));
+        cfg.progress
+            .step("done", 5, Some(5), fit.final_cost(), "fit finished");
+        let mut messages = init.messages;
+        if let Some(d) = &report.delay_estimate {
+            messages.push(format!(
+                "delay estimate {:.2} us (coherence {:.2}); {} the iterations",
+                d.tau_s * 1e6,
+                d.coherence,
+                if fit_delay {
+                    "refined in"
+                } else {
+                    "fixed during"
+                }
+            ));
+        }
+        messages.push(format!(
+            "{} CMIF peaks started the fit; weighting: {}",
+            freqs.len(),
+            weighting.name()
+        ));
+        messages.append(&mut fit.messages);
+        fit.messages = messages;
+        fit.estimator = format!(
+            "additive {} (CMIF init, {})",
+            match cfg.riv.method {
+                crate::IvMethod::Riv => "RIV, Algorithm 1",
+                crate::IvMethod::Sk => "SK iterations",
+            },
+            weighting.name()
+        );
+        fit.timings.clear();
+        for (stage, d) in timings {
+            fit.push_timing(stage, d);
+        }
+        fit.push_timing("total", t0.elapsed());
+        Ok((fit, report))
+    }
+}
+
+fn check_fs(fs_hz: f64, f_max: f64) -> Result<(), RivError> {
+    if !(fs_hz.is_finite() && fs_hz > 0.0) {
+        return Err(RivError::invalid(
+            "hold sample rate",
+            fs_hz,
+            "must be > 0 Hz",
+        ));
+    }
+    if f_max >= fs_hz / 2.0 {
+        return Err(RivError::invalid(
+            "hold sample rate",
+            fs_hz,
+            format!(
+                "the band reaches {f_max} Hz, at or above the Nyquist frequency {} Hz",
+                fs_hz / 2.0
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Initialises with 0, 1 and 2 integrators and keeps the simplest one that no richer
+/// one beats significantly (F test at 1e-3 on the numerator fit (24)).
+fn choose_rigid_body(
+    fd: &FitData,
+    freqs: &[f64],
+    base: &InitConfig,
+) -> Result<Fit<AdditiveModel>, RivError> {
+    let mut best: Option<Fit<AdditiveModel>> = None;
+    let mut tried = Vec::new();
+    for l in 0..=2usize {
+        let cfg = InitConfig {
+            rigid_body: if l == 0 {
+                RigidBody::None
+            } else {
+                RigidBody::Integrators(l)
+            },
+            ..base.clone()
+        };
+        let fit = match initial_model(fd, freqs, &cfg) {
+            Ok(f) => f,
+            Err(RivError::Structure(_)) => continue, // no submodel at all
+            Err(e) => return Err(e),
+        };
+        let v = fit.final_cost().unwrap_or(f64::INFINITY) * 2.0 * fd.n as f64;
+        tried.push((l, v));
+        best = match best {
+            None => Some(fit),
+            Some(b) => {
+                let vb = b.final_cost().unwrap_or(f64::INFINITY) * 2.0 * fd.n as f64;
+                let extra = fit
+                    .model
+                    .n_params()
+                    .saturating_sub(b.model.n_params())
+                    .max(1);
+                let s2 = noise_scale(v, fd, fit.model.n_params());
+                let fs = f_statistic(vb - v, extra, s2);
+                if fs > f_critical(extra, 1e-3) && v < vb {
+                    Some(fit)
+                } else {
+                    Some(b)
+                }
+            }
+        };
+    }
+    let mut best = best.ok_or_else(|| RivError::Structure("no modes and no rigid body".into()))?;
+    let l = best
+        .model
+        .submodels
+        .iter()
+        .map(|s| s.integrators)
+        .max()
+        .unwrap_or(0);
+    best.messages = vec![format!(
+        "rigid body: {l} integrator(s), chosen by comparing the initial fits ({})",
+        tried
+            .iter()
+            .map(|(l, v)| format!("l={l}: cost {:.3e}", v / (2.0 * fd.n as f64)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )];
+    Ok(best)
+}
+
+impl Estimator for AdditiveFitter {
+    type Model = AdditiveModel;
+    type Start = ();
+    type Error = RivError;
+
+    fn estimate<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        _start: (),
+    ) -> Result<Fit<AdditiveModel>, RivError> {
+        self.fit(data).map(|(f, _)| f)
+    }
+}

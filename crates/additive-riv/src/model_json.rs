@@ -1,0 +1,400 @@
+//! The model file (`MODEL.json`): a versioned, documented JSON form of an
+//! [`AdditiveModel`] that `frfit eval` reads back exactly.
+//!
+//! It holds two views of the same model:
+//!
+//! - the **modal form** for people and other tools: continuous-time `modes` (natural
+//!   frequency, damping, complex residue matrix of the upper pole), the `rigid_body`
+//!   (residues of `1/s^k`), the `feedthrough`, and the known factor (`delay_s`, `hold`,
+//!   `derivative_order`);
+//! - the **submodels** exactly as fitted (scaled coefficients and their scale), from which
+//!   the response is reproduced bit for bit.
+//!
+//! Schema version 1 (`"format": "frfit-additive-model"`, `"version": 1`); fields are
+//! documented on [`ModelFile`].
+
+use crate::model::{Submodel, SubmodelKind};
+use crate::{AdditiveModel, Domain, KnownFactor, RivError};
+use faer::Mat;
+use frf_data::ModelStructure;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The format tag of the model file.
+pub const FORMAT: &str = "frfit-additive-model";
+/// The schema version written by this crate.
+pub const VERSION: u32 = 1;
+
+/// A complex matrix as two real matrices (rows of outputs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ComplexMatrix {
+    /// Real parts, `ny` rows of `nu`.
+    pub re: Vec<Vec<f64>>,
+    /// Imaginary parts, `ny` rows of `nu`.
+    pub im: Vec<Vec<f64>>,
+}
+
+/// One mode of the modal form: `R / (s - p) + conj(R) / (s - conj p)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModeJson {
+    /// Natural frequency `|p| / 2 pi`, Hz.
+    pub f_hz: f64,
+    /// Relative damping `-Re p / |p|`.
+    pub zeta: f64,
+    /// Residue `R` of the upper pole `p` (continuous time).
+    pub residue: ComplexMatrix,
+    /// Numerical rank of the residue (singular values above 1e-6 of the largest).
+    pub rank: usize,
+}
+
+/// The rigid-body part `sum_k R_k / s^k`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RigidBodyJson {
+    /// Number of integrators `l`.
+    pub integrators: usize,
+    /// `residues[k - 1]` is `R_k`, the real coefficient of `1 / s^k`.
+    pub residues: Vec<Vec<Vec<f64>>>,
+}
+
+/// One submodel exactly as fitted (see [`Submodel`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SubmodelJson {
+    /// `rigid_body`, `mode`, `feedthrough`, `suspension` or `general`.
+    pub kind: SubmodelKind,
+    /// Poles at the origin (`z = 1` in discrete time).
+    pub integrators: usize,
+    /// Frequency scale `sigma` of the variable `x = s / sigma` (rad/s; 1 in discrete time).
+    pub scale: f64,
+    /// `a~_1 .. a~_n` of `A(x) = 1 + a~_1 x + ...`.
+    pub den: Vec<f64>,
+    /// Power of `x` of the first numerator matrix.
+    pub num_start: usize,
+    /// Numerator matrices `B~_r`, `ny` rows of `nu` each.
+    pub num: Vec<Vec<Vec<f64>>>,
+    /// Fixed numerator factor `c(x)`, ascending (`[1]` when none).
+    #[serde(default = "one_poly")]
+    pub num_poly: Vec<f64>,
+}
+
+fn one_poly() -> Vec<f64> {
+    vec![1.0]
+}
+
+/// How the model was obtained.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// The estimator, e.g. "additive RIV, Algorithm 1 (CMIF init, inverse variance)".
+    pub estimator: String,
+    /// The data file, when known.
+    pub data: Option<String>,
+    /// Weighting of the criterion.
+    pub weighting: String,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Why the iterations stopped.
+    pub convergence: String,
+    /// Final cost (8).
+    pub cost: Option<f64>,
+    /// Version of frfit.
+    pub frfit_version: String,
+    /// Free-form notes (messages of the fit).
+    pub notes: Vec<String>,
+}
+
+/// The model file, schema version 1.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelFile {
+    /// Always `"frfit-additive-model"`.
+    pub format: String,
+    /// Schema version (1).
+    pub version: u32,
+    /// Outputs.
+    pub ny: usize,
+    /// Inputs.
+    pub nu: usize,
+    /// Units of the modelled FRF, when known.
+    pub units: Option<String>,
+    /// Frequency band of the fit, Hz.
+    pub band_hz: Option<[f64; 2]>,
+    /// Time variable of the submodels (`continuous` or `zoh_discrete` with `ts`).
+    pub domain: Domain,
+    /// Delay `tau` of the known factor `exp(-j w tau)`, seconds.
+    pub delay_s: f64,
+    /// Whether the delay was a fitted parameter.
+    pub delay_fitted: bool,
+    /// The hold: `"zoh:FS"` (exact, in the domain), `"sinc:FS"` (amplitude factor) or
+    /// `"none"`.
+    pub hold: String,
+    /// `k` of the factor `(j w)^k` (0 displacement, 1 velocity, 2 accelerance).
+    pub derivative_order: u32,
+    /// Continuous-time modes (the hold, if any, mapped back exactly).
+    pub modes: Vec<ModeJson>,
+    /// Rigid-body part, when present.
+    pub rigid_body: Option<RigidBodyJson>,
+    /// Real poles other than modes (rare: overdamped submodels).
+    pub real_poles: Vec<(f64, Vec<Vec<f64>>)>,
+    /// Feedthrough `D`, when non-zero.
+    pub feedthrough: Option<Vec<Vec<f64>>>,
+    /// Minimal number of states of the real realisation (residues at rank tolerance
+    /// 1e-6).
+    pub order: usize,
+    /// The submodels exactly as fitted.
+    pub submodels: Vec<SubmodelJson>,
+    /// How the model was obtained.
+    pub provenance: Provenance,
+}
+
+fn rows(m: &Mat<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect())
+        .collect()
+}
+
+fn from_rows(r: &[Vec<f64>], ny: usize, nu: usize, what: &str) -> Result<Mat<f64>, RivError> {
+    if r.len() != ny || r.iter().any(|row| row.len() != nu) {
+        return Err(RivError::Structure(format!("{what} must be {ny}x{nu}")));
+    }
+    if r.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(RivError::Structure(format!(
+            "{what} holds a non-finite value"
+        )));
+    }
+    Ok(Mat::from_fn(ny, nu, |i, j| r[i][j]))
+}
+
+/// Relative rank tolerance used for the `rank` and `order` fields.
+pub const RANK_TOL: f64 = 1e-6;
+
+impl ModelFile {
+    /// Builds the file from a model and its provenance.
+    pub fn from_model(
+        model: &AdditiveModel,
+        units: Option<String>,
+        band_hz: Option<(f64, f64)>,
+        provenance: Provenance,
+    ) -> Result<Self, RivError> {
+        let mm = model.to_modal_model()?;
+        let modes = mm
+            .pairs
+            .iter()
+            .map(|p| {
+                let sv = p.residue.singular_values().unwrap_or_default();
+                let top = sv.first().copied().unwrap_or(0.0);
+                ModeJson {
+                    f_hz: p.f_hz(),
+                    zeta: p.zeta(),
+                    residue: ComplexMatrix {
+                        re: (0..mm.ny)
+                            .map(|i| (0..mm.nu).map(|j| p.residue[(i, j)].re).collect())
+                            .collect(),
+                        im: (0..mm.ny)
+                            .map(|i| (0..mm.nu).map(|j| p.residue[(i, j)].im).collect())
+                            .collect(),
+                    },
+                    rank: sv.iter().filter(|&&s| s > RANK_TOL * top).count(),
+                }
+            })
+            .collect();
+        let rigid_body = (!mm.rigid.is_empty()).then(|| RigidBodyJson {
+            integrators: mm.rigid.len(),
+            residues: mm.rigid.iter().map(rows).collect(),
+        });
+        let has_d = (0..mm.ny).any(|i| (0..mm.nu).any(|j| mm.feedthrough[(i, j)] != 0.0));
+        let hold = match (model.domain(), model.factor.sinc_hold_fs) {
+            (Domain::ZohDiscrete { ts }, _) => format!("zoh:{}", 1.0 / ts),
+            (_, Some(fs)) => format!("sinc:{fs}"),
+            _ => "none".into(),
+        };
+        Ok(Self {
+            format: FORMAT.into(),
+            version: VERSION,
+            ny: model.ny(),
+            nu: model.nu(),
+            units,
+            band_hz: band_hz.map(|(a, b)| [a, b]),
+            domain: model.domain(),
+            delay_s: model.factor.delay_s,
+            delay_fitted: model.factor.fit_delay,
+            hold,
+            derivative_order: model.factor.derivative_order,
+            modes,
+            rigid_body,
+            real_poles: mm
+                .real_poles
+                .iter()
+                .map(|r| (r.pole, rows(&r.residue)))
+                .collect(),
+            feedthrough: has_d.then(|| rows(&mm.feedthrough)),
+            order: mm.order(RANK_TOL),
+            submodels: model
+                .submodels
+                .iter()
+                .map(|s| SubmodelJson {
+                    kind: s.kind,
+                    integrators: s.integrators,
+                    scale: s.scale,
+                    den: s.den.clone(),
+                    num_start: s.num_start,
+                    num: s.num.iter().map(rows).collect(),
+                    num_poly: s.num_poly.clone(),
+                })
+                .collect(),
+            provenance,
+        })
+    }
+
+    /// Rebuilds the exact model from the `submodels`, `domain` and known factor.
+    pub fn to_model(&self) -> Result<AdditiveModel, RivError> {
+        if self.format != FORMAT {
+            return Err(RivError::Structure(format!(
+                "not an frfit model file (format `{}`, expected `{FORMAT}`)",
+                self.format
+            )));
+        }
+        if self.version != VERSION {
+            return Err(RivError::Structure(format!(
+                "model file version {} is not supported (this frfit reads version {VERSION})",
+                self.version
+            )));
+        }
+        let sinc = self
+            .hold
+            .strip_prefix("sinc:")
+            .map(|f| f.parse::<f64>())
+            .transpose()
+            .map_err(|_| {
+                RivError::Structure(format!(
+                    "hold `{}` does not parse (expected sinc:FS)",
+                    self.hold
+                ))
+            })?;
+        let mut m =
+            AdditiveModel::new(self.ny, self.nu, self.domain)?.with_factor(KnownFactor {
+                delay_s: self.delay_s,
+                fit_delay: self.delay_fitted,
+                derivative_order: self.derivative_order,
+                sinc_hold_fs: sinc,
+            })?;
+        for (i, s) in self.submodels.iter().enumerate() {
+            let num = s
+                .num
+                .iter()
+                .map(|r| from_rows(r, self.ny, self.nu, &format!("submodels[{i}].num")))
+                .collect::<Result<Vec<_>, _>>()?;
+            if s.den.iter().any(|v| !v.is_finite()) {
+                return Err(RivError::Structure(format!(
+                    "submodels[{i}].den holds a non-finite value"
+                )));
+            }
+            m.push_submodel(Submodel {
+                kind: s.kind,
+                integrators: s.integrators,
+                den: s.den.clone(),
+                num_start: s.num_start,
+                num,
+                scale: s.scale,
+                num_poly: s.num_poly.clone(),
+            })?;
+        }
+        Ok(m)
+    }
+
+    /// Reads and checks a model file.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, RivError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| RivError::ModelFile {
+            path: path.display().to_string(),
+            why: e.to_string(),
+        })?;
+        let f: ModelFile = serde_json::from_str(&text).map_err(|e| RivError::ModelFile {
+            path: path.display().to_string(),
+            why: format!("line {} column {}: {e}", e.line(), e.column()),
+        })?;
+        f.to_model().map_err(|e| RivError::ModelFile {
+            path: path.display().to_string(),
+            why: e.to_string(),
+        })?;
+        Ok(f)
+    }
+
+    /// Writes the file (pretty-printed JSON).
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), RivError> {
+        let path = path.as_ref();
+        let text = serde_json::to_string_pretty(self).map_err(|e| RivError::ModelFile {
+            path: path.display().to_string(),
+            why: e.to_string(),
+        })?;
+        std::fs::write(path, text).map_err(|e| RivError::ModelFile {
+            path: path.display().to_string(),
+            why: e.to_string(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::TAU;
+
+    #[test]
+    fn round_trip_reproduces_the_response() {
+        for domain in [Domain::Continuous, Domain::ZohDiscrete { ts: 1e-4 }] {
+            let mut m = AdditiveModel::new(2, 3, domain).unwrap();
+            m.push_rigid_body(2, 300.0).unwrap();
+            m.push_mode(150.0, 0.01, false).unwrap();
+            m.push_mode(900.0, 0.02, false).unwrap();
+            m.push_feedthrough().unwrap();
+            let mut v = 0.1;
+            for s in &mut m.submodels {
+                for b in &mut s.num {
+                    for j in 0..3 {
+                        for i in 0..2 {
+                            v = (v * 7.3 + 0.37) % 1.0 - 0.5;
+                            b[(i, j)] = v;
+                        }
+                    }
+                }
+            }
+            let m = m
+                .with_factor(KnownFactor {
+                    delay_s: 1e-4,
+                    fit_delay: true,
+                    ..Default::default()
+                })
+                .unwrap();
+            let f = ModelFile::from_model(
+                &m,
+                Some("m/N".into()),
+                Some((20.0, 2000.0)),
+                Provenance::default(),
+            )
+            .unwrap();
+            let text = serde_json::to_string(&f).unwrap();
+            let back: ModelFile = serde_json::from_str(&text).unwrap();
+            let m2 = back.to_model().unwrap();
+            let w: Vec<f64> = (1..100).map(|k| TAU * 20.0 * k as f64).collect();
+            let (a, b) = (m.response_at(&w), m2.response_at(&w));
+            assert!(
+                a.values.iter().zip(&b.values).all(|(x, y)| x == y),
+                "response changed in the round trip"
+            );
+            assert_eq!(f.modes.len(), 2);
+            assert!(f.rigid_body.is_some());
+        }
+    }
+
+    #[test]
+    fn wrong_format_and_version_are_rejected() {
+        let m = {
+            let mut m = AdditiveModel::new(1, 1, Domain::Continuous).unwrap();
+            m.push_mode(10.0, 0.1, false).unwrap();
+            m
+        };
+        let mut f = ModelFile::from_model(&m, None, None, Provenance::default()).unwrap();
+        f.version = 99;
+        assert!(f.to_model().unwrap_err().to_string().contains("version 99"));
+        f.version = VERSION;
+        f.format = "x".into();
+        assert!(f.to_model().is_err());
+    }
+}
