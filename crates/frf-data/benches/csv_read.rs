@@ -30,7 +30,10 @@ fn csv_read(c: &mut Criterion) {
     g.finish();
 
     let Some(uff) = shared_file("uff/wafer_nominal.uff") else {
-        println!("{}", skip_message("bench uff_read", "uff/wafer_nominal.uff"));
+        println!(
+            "{}",
+            skip_message("bench uff_read", "uff/wafer_nominal.uff")
+        );
         return;
     };
     let mut g = c.benchmark_group("uff58");
