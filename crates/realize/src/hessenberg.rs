@@ -62,8 +62,10 @@ pub(crate) struct Singular;
 
 impl HessenbergForm {
     /// Reduces `A` of `ss` to upper Hessenberg form by Householder similarity
-    /// transformations and applies them to `B` and `C`.
-    pub fn new(ss: &StateSpace) -> Self {
+    /// transformations and applies them to `B` and `C`. Fails when `ss` does not pass
+    /// [`StateSpace::validate`].
+    pub fn new(ss: &StateSpace) -> Result<Self, RealizeError> {
+        ss.validate()?;
         let n = ss.n_states();
         let (ny, nu) = (ss.ny(), ss.nu());
         let mut h: Vec<f64> = (0..n * n).map(|idx| ss.a[(idx / n, idx % n)]).collect();
@@ -152,7 +154,7 @@ impl HessenbergForm {
             .map(|i| h[i * n..(i + 1) * n].iter().map(|t| t.abs()).sum::<f64>())
             .fold(0.0, f64::max);
         let bt = (0..nu * n).map(|idx| b[(idx % n) * nu + idx / n]).collect();
-        Self {
+        Ok(Self {
             n,
             ny,
             nu,
@@ -161,7 +163,7 @@ impl HessenbergForm {
             c,
             d,
             h_norm,
-        }
+        })
     }
 
     /// Number of states.
