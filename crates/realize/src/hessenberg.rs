@@ -39,7 +39,7 @@ pub struct HessenbergForm {
 /// Reusable per-point work space for [`HessenbergForm::eval_into`]. Complex arrays are
 /// stored as separate real and imaginary parts so the inner loops vectorize.
 #[derive(Debug, Clone, Default)]
-pub struct HessenbergWork {
+pub(crate) struct HessenbergWork {
     /// The LU factors of `x I - H`, row-major, real parts.
     m_re: Vec<f64>,
     /// Imaginary parts of the factors.
