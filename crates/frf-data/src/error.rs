@@ -115,6 +115,29 @@ pub enum FrfError {
     /// A model-level error from `realize`.
     #[error(transparent)]
     Realize(#[from] RealizeError),
+    /// The input matrix of a MIMO FRF estimate is singular at a line (an input that no
+    /// experiment excites independently).
+    #[error("singular input matrix at line {line} ({freq_hz} Hz), realization {realization}: reciprocal condition {rcond:.1e}; {why}")]
+    SingularInput {
+        /// 0-based line index.
+        line: usize,
+        /// Its frequency, Hz.
+        freq_hz: f64,
+        /// 0-based realization.
+        realization: usize,
+        /// 1-norm reciprocal condition number of the input matrix.
+        rcond: f64,
+        /// What it means for the experiment design.
+        why: String,
+    },
+    /// A simulated closed loop is unstable.
+    #[error("the closed loop is unstable: a closed-loop pole has modulus {spectral_radius:.6} >= 1 (near {pole_hz:.1} Hz); lower the controller bandwidth or gain")]
+    UnstableClosedLoop {
+        /// The largest modulus of the discrete closed-loop poles.
+        spectral_radius: f64,
+        /// Frequency of that pole, Hz (`arg(z) fs / 2 pi`).
+        pole_hz: f64,
+    },
 }
 
 fn format_location(file: &str, line: usize, column: Option<&str>, detail: &str) -> String {

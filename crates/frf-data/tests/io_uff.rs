@@ -259,6 +259,8 @@ fn assembles_by_first_appearance() {
     assert_eq!(f.metadata["uff.abscissa_spacing"], "even");
     assert_eq!(f.units.as_deref(), Some("m/N"));
     assert_eq!(f.metadata["uff.id1"], "test record 20:5");
+    assert_eq!(f.metadata["uff.abscissa_label"], "Frequency");
+    assert_eq!(f.metadata["uff.abscissa_units"], "Hz");
     assert!(!f.metadata.contains_key("uff.skipped"));
 }
 

@@ -172,10 +172,10 @@ impl ModalModel {
             let (bi, i) = (r / ny, r % ny);
             let (bj, j) = (c / nu, c % nu);
             let k = bi + bj + shift;
-            if k < l {
-                self.rigid[k][(i, j)]
-            } else {
-                0.0
+            match self.rigid.get(k) {
+                // (shape-checked here too: `order` runs on unvalidated models)
+                Some(r) if k < l && i < r.nrows() && j < r.ncols() => r[(i, j)],
+                _ => 0.0,
             }
         })
     }
@@ -530,6 +530,7 @@ impl StateSpace {
                 needed: "continuous-time".into(),
             });
         }
+        self.validate()?;
         if !(zero_tol.is_finite() && zero_tol >= 0.0) {
             return Err(RealizeError::InvalidParameter {
                 name: "zero_tol".into(),

@@ -26,8 +26,8 @@ pub struct HessenbergForm {
     nu: usize,
     /// `H = Q^T A Q`, row-major, `n x n` (zero below the first subdiagonal).
     h: Vec<f64>,
-    /// `B~ = Q^T B`, row-major, `n x nu`.
-    b: Vec<f64>,
+    /// `B~^T = B^T Q`, row-major, `nu x n` (column `j` of `B~` contiguous).
+    bt: Vec<f64>,
     /// `C~ = C Q`, row-major, `ny x n`.
     c: Vec<f64>,
     /// `D`, column-major, `ny x nu`.
@@ -36,17 +36,24 @@ pub struct HessenbergForm {
     h_norm: f64,
 }
 
-/// Reusable per-point work space for [`HessenbergForm::eval_into`].
+/// Reusable per-point work space for [`HessenbergForm::eval_into`]. Complex arrays are
+/// stored as separate real and imaginary parts so the inner loops vectorize.
 #[derive(Debug, Clone, Default)]
-pub struct HessenbergWork {
-    /// The LU factors of `x I - H`, row-major.
-    m: Vec<C64>,
+pub(crate) struct HessenbergWork {
+    /// The LU factors of `x I - H`, row-major, real parts.
+    m_re: Vec<f64>,
+    /// Imaginary parts of the factors.
+    m_im: Vec<f64>,
+    /// Inverse pivots `1 / U[k][k]`.
+    inv_piv: Vec<C64>,
     /// Row multipliers of the elimination.
     mult: Vec<C64>,
     /// Whether rows `k` and `k + 1` were swapped at step `k`.
     swap: Vec<bool>,
-    /// One right-hand side.
-    rhs: Vec<C64>,
+    /// All right-hand sides, one after another (`n` entries each), real parts.
+    x_re: Vec<f64>,
+    /// Imaginary parts of the right-hand sides.
+    x_im: Vec<f64>,
 }
 
 /// Why a point could not be evaluated (internal; mapped to [`RealizeError::AtPole`]).
@@ -55,8 +62,10 @@ pub(crate) struct Singular;
 
 impl HessenbergForm {
     /// Reduces `A` of `ss` to upper Hessenberg form by Householder similarity
-    /// transformations and applies them to `B` and `C`.
-    pub fn new(ss: &StateSpace) -> Self {
+    /// transformations and applies them to `B` and `C`. Fails when `ss` does not pass
+    /// [`StateSpace::validate`].
+    pub fn new(ss: &StateSpace) -> Result<Self, RealizeError> {
+        ss.validate()?;
         let n = ss.n_states();
         let (ny, nu) = (ss.ny(), ss.nu());
         let mut h: Vec<f64> = (0..n * n).map(|idx| ss.a[(idx / n, idx % n)]).collect();
@@ -144,16 +153,17 @@ impl HessenbergForm {
         let h_norm = (0..n)
             .map(|i| h[i * n..(i + 1) * n].iter().map(|t| t.abs()).sum::<f64>())
             .fold(0.0, f64::max);
-        Self {
+        let bt = (0..nu * n).map(|idx| b[(idx % n) * nu + idx / n]).collect();
+        Ok(Self {
             n,
             ny,
             nu,
             h,
-            b,
+            bt,
             c,
             d,
             h_norm,
-        }
+        })
     }
 
     /// Number of states.
@@ -185,66 +195,101 @@ impl HessenbergForm {
             return Ok(());
         }
         self.factor(x, work)?;
-        let HessenbergWork { m, mult, swap, rhs } = work;
+        let HessenbergWork {
+            m_re,
+            m_im,
+            inv_piv,
+            mult,
+            swap,
+            x_re,
+            x_im,
+        } = work;
         if nu <= ny {
-            // Columns: (xI - H) X = B~, G(:, j) += C~ X(:, j).
+            // Columns: (xI - H) X = B~, then G += C~ X.
+            x_re.clear();
+            x_re.extend_from_slice(&self.bt);
+            x_im.clear();
+            x_im.resize(nu * n, 0.0);
             for j in 0..nu {
-                for i in 0..n {
-                    rhs[i] = C64::new(self.b[i * nu + j], 0.0);
-                }
+                let (xr, xi) = (&mut x_re[j * n..(j + 1) * n], &mut x_im[j * n..(j + 1) * n]);
                 for k in 0..n - 1 {
                     if swap[k] {
-                        rhs.swap(k, k + 1);
+                        xr.swap(k, k + 1);
+                        xi.swap(k, k + 1);
                     }
-                    let t = rhs[k];
-                    rhs[k + 1] -= mult[k] * t;
+                    let l = mult[k];
+                    let (tr, ti) = (xr[k], xi[k]);
+                    xr[k + 1] -= l.re * tr - l.im * ti;
+                    xi[k + 1] -= l.re * ti + l.im * tr;
                 }
                 for k in (0..n).rev() {
-                    let row = &m[k * n..(k + 1) * n];
-                    let mut s = rhs[k];
-                    for jj in k + 1..n {
-                        s -= row[jj] * rhs[jj];
+                    let (ur, ui) = (
+                        &m_re[k * n + k + 1..(k + 1) * n],
+                        &m_im[k * n + k + 1..(k + 1) * n],
+                    );
+                    let (vr, vi) = (&xr[k + 1..], &xi[k + 1..]);
+                    let mut sr = 0.0;
+                    let mut si = 0.0;
+                    for q in 0..ur.len() {
+                        sr += ur[q] * vr[q] - ui[q] * vi[q];
+                        si += ur[q] * vi[q] + ui[q] * vr[q];
                     }
-                    rhs[k] = s / row[k];
+                    let t = C64::new(xr[k] - sr, xi[k] - si) * inv_piv[k];
+                    xr[k] = t.re;
+                    xi[k] = t.im;
                 }
                 for i in 0..ny {
                     let crow = &self.c[i * n..(i + 1) * n];
-                    let mut s = C64::new(0.0, 0.0);
-                    for (cv, xv) in crow.iter().zip(rhs.iter()) {
-                        s += xv * *cv;
+                    let (mut sr, mut si) = (0.0, 0.0);
+                    for q in 0..n {
+                        sr += crow[q] * xr[q];
+                        si += crow[q] * xi[q];
                     }
-                    out[j * ny + i] += s;
+                    out[j * ny + i] += C64::new(sr, si);
                 }
             }
         } else {
-            // Rows: Y (xI - H) = C~, G(i, :) += Y(i, :) B~.
+            // Rows: Y (xI - H) = C~, i.e. Y = (C~ U^-1) E, then G += Y B~.
+            x_re.clear();
+            x_re.extend_from_slice(&self.c);
+            x_im.clear();
+            x_im.resize(ny * n, 0.0);
             for i in 0..ny {
-                for k in 0..n {
-                    rhs[k] = C64::new(self.c[i * n + k], 0.0);
-                }
+                let (yr, yi) = (&mut x_re[i * n..(i + 1) * n], &mut x_im[i * n..(i + 1) * n]);
                 // w U = c (forward, row-oriented axpy).
                 for k in 0..n {
-                    let row = &m[k * n..(k + 1) * n];
-                    let wk = rhs[k] / row[k];
-                    rhs[k] = wk;
-                    for jj in k + 1..n {
-                        rhs[jj] -= wk * row[jj];
+                    let w = C64::new(yr[k], yi[k]) * inv_piv[k];
+                    yr[k] = w.re;
+                    yi[k] = w.im;
+                    let (ur, ui) = (
+                        &m_re[k * n + k + 1..(k + 1) * n],
+                        &m_im[k * n + k + 1..(k + 1) * n],
+                    );
+                    let (vr, vi) = (&mut yr[k + 1..], &mut yi[k + 1..]);
+                    for q in 0..ur.len() {
+                        vr[q] -= w.re * ur[q] - w.im * ui[q];
+                        vi[q] -= w.re * ui[q] + w.im * ur[q];
                     }
                 }
                 // y = w E_{n-2} ... E_0.
                 for k in (0..n - 1).rev() {
-                    let t = rhs[k + 1];
-                    rhs[k] -= mult[k] * t;
+                    let l = mult[k];
+                    let (tr, ti) = (yr[k + 1], yi[k + 1]);
+                    yr[k] -= l.re * tr - l.im * ti;
+                    yi[k] -= l.re * ti + l.im * tr;
                     if swap[k] {
-                        rhs.swap(k, k + 1);
+                        yr.swap(k, k + 1);
+                        yi.swap(k, k + 1);
                     }
                 }
                 for j in 0..nu {
-                    let mut s = C64::new(0.0, 0.0);
-                    for k in 0..n {
-                        s += rhs[k] * self.b[k * nu + j];
+                    let bcol = &self.bt[j * n..(j + 1) * n];
+                    let (mut sr, mut si) = (0.0, 0.0);
+                    for q in 0..n {
+                        sr += yr[q] * bcol[q];
+                        si += yi[q] * bcol[q];
                     }
-                    out[j * ny + i] += s;
+                    out[j * ny + i] += C64::new(sr, si);
                 }
             }
         }
@@ -258,43 +303,58 @@ impl HessenbergForm {
     /// LU factorization of `x I - H` with adjacent-row partial pivoting, in `work`.
     fn factor(&self, x: C64, work: &mut HessenbergWork) -> Result<(), Singular> {
         let n = self.n;
-        work.m.resize(n * n, C64::new(0.0, 0.0));
+        work.m_re.resize(n * n, 0.0);
+        work.m_im.resize(n * n, 0.0);
+        work.inv_piv.resize(n, C64::new(0.0, 0.0));
         work.mult.resize(n, C64::new(0.0, 0.0));
         work.swap.resize(n, false);
-        work.rhs.resize(n, C64::new(0.0, 0.0));
-        let m = &mut work.m;
+        let (m_re, m_im) = (&mut work.m_re, &mut work.m_im);
         for i in 0..n {
             let lo = i.saturating_sub(1);
             for j in lo..n {
-                m[i * n + j] = C64::new(-self.h[i * n + j], 0.0);
+                m_re[i * n + j] = -self.h[i * n + j];
+                m_im[i * n + j] = 0.0;
             }
-            m[i * n + i] += x;
+            m_re[i * n + i] += x.re;
+            m_im[i * n + i] += x.im;
         }
         let tol = f64::EPSILON * (x.norm() + self.h_norm);
         for k in 0..n {
+            let kk = k * n + k;
             if k + 1 < n {
-                let a = m[k * n + k];
-                let b = m[(k + 1) * n + k];
-                let swap = b.norm_sqr() > a.norm_sqr();
+                let k1 = (k + 1) * n + k;
+                let a2 = m_re[kk] * m_re[kk] + m_im[kk] * m_im[kk];
+                let b2 = m_re[k1] * m_re[k1] + m_im[k1] * m_im[k1];
+                let swap = b2 > a2;
                 work.swap[k] = swap;
                 if swap {
                     for j in k..n {
-                        m.swap(k * n + j, (k + 1) * n + j);
+                        m_re.swap(k * n + j, (k + 1) * n + j);
+                        m_im.swap(k * n + j, (k + 1) * n + j);
                     }
                 }
-                let p = m[k * n + k];
-                if p.norm().is_nan() || p.norm() <= tol {
-                    return Err(Singular);
-                }
-                let l = m[(k + 1) * n + k] / p;
-                work.mult[k] = l;
-                m[(k + 1) * n + k] = C64::new(0.0, 0.0);
-                for j in k + 1..n {
-                    let t = m[k * n + j];
-                    m[(k + 1) * n + j] -= l * t;
-                }
-            } else if m[k * n + k].norm().is_nan() || m[k * n + k].norm() <= tol {
+            }
+            let p = C64::new(m_re[kk], m_im[kk]);
+            let pn = p.norm();
+            if pn.is_nan() || pn <= tol {
                 return Err(Singular);
+            }
+            let ip = p.inv();
+            work.inv_piv[k] = ip;
+            if k + 1 < n {
+                let k1 = (k + 1) * n + k;
+                let l = C64::new(m_re[k1], m_im[k1]) * ip;
+                work.mult[k] = l;
+                m_re[k1] = 0.0;
+                m_im[k1] = 0.0;
+                let (top_re, bot_re) = m_re.split_at_mut((k + 1) * n);
+                let (top_im, bot_im) = m_im.split_at_mut((k + 1) * n);
+                let (ur, ui) = (&top_re[kk + 1..(k + 1) * n], &top_im[kk + 1..(k + 1) * n]);
+                let (vr, vi) = (&mut bot_re[k + 1..n], &mut bot_im[k + 1..n]);
+                for q in 0..ur.len() {
+                    vr[q] -= l.re * ur[q] - l.im * ui[q];
+                    vi[q] -= l.re * ui[q] + l.im * ur[q];
+                }
             }
         }
         Ok(())

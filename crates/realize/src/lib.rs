@@ -10,8 +10,15 @@
 //!   and a feedthrough; its response is a sum of first-order terms and is cheap;
 //! - exact zero-order-hold discretization (augmented matrix exponential) and the
 //!   frequency response of a continuous model seen through a ZOH sampler with an extra
-//!   delay of `d` samples ([`zoh`]);
-//! - conversions between [`ModalModel`] and a real block-diagonal [`StateSpace`].
+//!   delay of `d` samples ([`zoh`]), with the matrix exponential of [`expm`] (Higham's
+//!   2005 scaling and squaring);
+//! - conversions between [`ModalModel`] and a real block-diagonal [`StateSpace`]
+//!   ([`convert`]: minimal realization by residue ranks, modal decomposition that
+//!   handles integrator chains exactly).
+//!
+//! Threading: the frequency responses and [`expm::expm`] are sequential; the SVDs,
+//! eigendecompositions and matrix products of the conversions follow faer's global
+//! setting, which applications should set to `Par::Seq` on small machines.
 //!
 //! `realize` depends on no other frfit crate: `frf-data` builds its simulated plants
 //! in these types, so it sits above this crate.

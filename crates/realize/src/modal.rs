@@ -221,8 +221,10 @@ impl ModalModel {
     }
 
     /// The continuous-time frequency response `P(j w)` at the angular frequencies
-    /// `omega` (rad/s). Fails at `w = 0` when the model has integrators.
+    /// `omega` (rad/s). Fails at `w = 0` when the model has integrators, and when the
+    /// model does not pass [`ModalModel::validate`].
     pub fn freq_response(&self, omega: &[f64]) -> Result<ResponseGrid, RealizeError> {
+        self.validate()?;
         let mut g = ResponseGrid::zeros(omega.len(), self.ny, self.nu);
         for (k, &w) in omega.iter().enumerate() {
             if w == 0.0 && !self.rigid.is_empty() {
@@ -255,6 +257,7 @@ impl ModalModel {
                 why: "the sample time must be finite and > 0".into(),
             });
         }
+        self.validate()?;
         let (ny, nu) = (self.ny, self.nu);
         let mut g = ResponseGrid::zeros(omega.len(), ny, nu);
         // Per-term discrete gains, computed once.

@@ -41,6 +41,16 @@ impl StateSpace {
         d: Mat<f64>,
         domain: TimeDomain,
     ) -> Result<Self, RealizeError> {
+        let s = Self { a, b, c, d, domain };
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// Checks what [`StateSpace::new`] checks: the shapes of `A, B, C, D` agree, every
+    /// entry is finite and a discrete sample time is finite and positive. The fields are
+    /// public, so every method that computes with them calls this first.
+    pub fn validate(&self) -> Result<(), RealizeError> {
+        let (a, b, c, d) = (&self.a, &self.b, &self.c, &self.d);
         let n = a.nrows();
         let dim = |what: &str, expected: String, got: String| RealizeError::Dimension {
             what: what.into(),
@@ -71,12 +81,12 @@ impl StateSpace {
                 format!("{}x{}", d.nrows(), d.ncols()),
             ));
         }
-        for (what, m) in [("A", &a), ("B", &b), ("C", &c), ("D", &d)] {
+        for (what, m) in [("A", a), ("B", b), ("C", c), ("D", d)] {
             if !(0..m.ncols()).all(|j| (0..m.nrows()).all(|i| m[(i, j)].is_finite())) {
                 return Err(RealizeError::NonFinite { what: what.into() });
             }
         }
-        if let TimeDomain::Discrete { ts } = domain {
+        if let TimeDomain::Discrete { ts } = self.domain {
             if !(ts.is_finite() && ts > 0.0) {
                 return Err(RealizeError::InvalidParameter {
                     name: "ts".into(),
@@ -85,7 +95,7 @@ impl StateSpace {
                 });
             }
         }
-        Ok(Self { a, b, c, d, domain })
+        Ok(())
     }
 
     /// Number of states.
@@ -111,7 +121,7 @@ impl StateSpace {
 
     /// The orthogonal Hessenberg reduction of this model (Laub 1981), for evaluating
     /// the response at many points; see [`crate::hessenberg`].
-    pub fn hessenberg(&self) -> HessenbergForm {
+    pub fn hessenberg(&self) -> Result<HessenbergForm, RealizeError> {
         HessenbergForm::new(self)
     }
 
@@ -130,7 +140,7 @@ impl StateSpace {
                 what: format!("omega[{k}]"),
             });
         }
-        let hf = self.hessenberg();
+        let hf = self.hessenberg()?;
         match self.domain {
             TimeDomain::Continuous => {
                 eval_grid(&hf, omega.iter().map(|&w| C64::new(0.0, w)), |k| omega[k])
@@ -148,7 +158,7 @@ impl StateSpace {
     /// [`StateSpace::freq_response`]. When a point is a pole the error reports, as
     /// `omega`, `Im x` for a continuous model and `arg(x) / ts` for a discrete one.
     pub fn freq_response_at(&self, points: &[C64]) -> Result<ResponseGrid, RealizeError> {
-        let hf = self.hessenberg();
+        let hf = self.hessenberg()?;
         let domain = self.domain;
         eval_grid(&hf, points.iter().copied(), |k| match domain {
             TimeDomain::Continuous => points[k].im,

@@ -32,6 +32,7 @@ fn check_ts(ts: f64) -> Result<(), RealizeError> {
 /// augmented matrix exponential (Van Loan 1978; exponential by Higham 2005). Fails with
 /// [`RealizeError::WrongDomain`] for a discrete model.
 pub fn discretize_zoh(ss: &StateSpace, ts: f64) -> Result<StateSpace, RealizeError> {
+    ss.validate()?;
     if ss.domain != TimeDomain::Continuous {
         return Err(RealizeError::WrongDomain {
             op: "discretize_zoh".into(),

@@ -175,7 +175,7 @@ fn random_dense_models_match_dense_lu_on_both_solve_sides() {
         let d = Mat::from_fn(ny, nu, |_, _| gauss(&mut r));
         let m = ss(a, b, c, d);
         // Hessenberg structure of the reduced matrix.
-        let hf = m.hessenberg();
+        let hf = m.hessenberg().unwrap();
         for i in 0..n {
             for j in 0..i.saturating_sub(1) {
                 assert_eq!(hf.h(i, j), 0.0);
@@ -305,4 +305,38 @@ fn empty_state_gives_feedthrough() {
     let mut mm = ModalModel::new(2, 3);
     mm.feedthrough = d;
     assert_eq!(mm.to_state_space(0.0).unwrap().n_states(), 0);
+}
+
+#[test]
+fn inconsistent_public_fields_are_errors_not_panics() {
+    // The fields are public: a model assembled by hand with mismatched shapes.
+    let bad = StateSpace {
+        a: Mat::zeros(3, 3),
+        b: Mat::zeros(2, 1),
+        c: Mat::zeros(1, 3),
+        d: Mat::zeros(1, 1),
+        domain: TimeDomain::Continuous,
+    };
+    for r in [
+        bad.freq_response(&[1.0]).map(|_| ()),
+        bad.freq_response_at(&[C64::new(0.0, 1.0)]).map(|_| ()),
+        bad.discretize_zoh(0.1).map(|_| ()),
+        bad.to_modal().map(|_| ()),
+        bad.hessenberg().map(|_| ()),
+    ] {
+        assert!(matches!(r, Err(RealizeError::Dimension { .. })), "{r:?}");
+    }
+    let mut m = ModalModel::new(2, 2);
+    m.rigid = vec![Mat::zeros(2, 2), Mat::from_fn(3, 1, |_, _| 1.0)];
+    assert!(matches!(
+        m.freq_response(&[1.0]),
+        Err(RealizeError::Dimension { .. })
+    ));
+    assert!(matches!(
+        m.zoh_response(&[1.0], 1e-3, 0.0),
+        Err(RealizeError::Dimension { .. })
+    ));
+    // `order` and `reduce_rank` are infallible and must not panic either.
+    let _ = m.order(0.0);
+    let _ = m.reduce_rank(0.0);
 }

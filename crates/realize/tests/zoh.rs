@@ -5,6 +5,7 @@ mod common;
 
 use common::{max_line_rel_err, random_modal, Rigid, Spec};
 use faer::Mat;
+use proptest::prelude::*;
 use realize::{RealizeError, StateSpace, TimeDomain, C64};
 
 fn continuous(a: Mat<f64>, b: Mat<f64>, c: Mat<f64>) -> StateSpace {
@@ -158,4 +159,32 @@ fn rejects_bad_sample_time_and_discrete_input() {
     let want = (1.0 - f64::exp(-0.1)) / (z - f64::exp(-0.1));
     let got = d.freq_response(&[3.0]).unwrap().get(0, 0, 0);
     assert!((got - want).norm() < 1e-15 * want.norm());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Random systems and sample times: closed-form modal ZOH = discretized state space.
+    #[test]
+    fn modal_zoh_equals_state_space_zoh(
+        seed in any::<u64>(),
+        ny in 1usize..4,
+        nu in 1usize..5,
+        pairs in 1usize..=5,
+        real_poles in 0usize..=2,
+        rigid in prop_oneof![Just(Rigid::None), Just(Rigid::Mass), Just(Rigid::General)],
+        // |p| ts between 1e-3 and 3 for the fastest pole.
+        ts_scale in 1e-3f64..3.0,
+        delay in 0usize..3,
+    ) {
+        let spec = Spec { ny, nu, pairs, real_poles, rigid, feedthrough: seed % 2 == 0, w_lo: 1.0, w_hi: 1000.0 };
+        let (m, _) = random_modal(seed, spec);
+        let ts = ts_scale / 1000.0;
+        let nyquist = std::f64::consts::PI / ts;
+        let omega: Vec<f64> = (1..=200).map(|k| nyquist * k as f64 / 201.0).collect();
+        let gm = m.zoh_response(&omega, ts, delay as f64).unwrap();
+        let gs = m.to_state_space(1e-12).unwrap().zoh_response(&omega, ts, delay).unwrap();
+        let e = max_line_rel_err(&gs, &gm);
+        prop_assert!(e < 1e-10, "ts = {:e}: rel. error {:e}", ts, e);
+    }
 }

@@ -719,8 +719,10 @@ fn units_label(s: &str) -> Option<&str> {
 /// metadata: `uff.outputs` and `uff.inputs` list `node:direction` per row and column
 /// (for example `1:+Z 2:+Z`); `uff.records`, `uff.ordinate`, `uff.abscissa_spacing`,
 /// the data types `uff.abscissa`, `uff.numerator`, `uff.denominator`, and `uff.id1`
-/// (the first record's description line) describe the file. [`Frf::units`] is
-/// `numerator/denominator` from the units labels of records 9 and 10 when they are set.
+/// (the first record's description line) describe the file. The abscissa is taken to be
+/// in Hz; its axis and units labels, when set, are kept in `uff.abscissa_label` and
+/// `uff.abscissa_units`. [`Frf::units`] is `numerator/denominator` from the units
+/// labels of records 9 and 10 when they are set.
 ///
 /// Other datasets (geometry, units, ...) and dataset 58 records of other function types
 /// are skipped and listed in `uff.skipped`. A 0 Hz point whose values are not finite
@@ -999,6 +1001,9 @@ fn assemble(l: &Lines<'_>, records: Vec<Record>, skipped: Vec<String>) -> Result
     }
     if let Some(lab) = units_label(&first.abscissa.label) {
         md.insert("uff.abscissa_label".to_string(), lab.to_string());
+    }
+    if let Some(lab) = units_label(&first.abscissa.units) {
+        md.insert("uff.abscissa_units".to_string(), lab.to_string());
     }
     if !skipped.is_empty() {
         md.insert("uff.skipped".to_string(), skipped.join("; "));

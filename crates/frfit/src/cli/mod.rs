@@ -7,6 +7,8 @@ use frfit::FrfitError;
 pub mod cmif;
 pub mod common;
 pub mod info;
+pub mod nonparametric;
+pub mod simulate;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -29,6 +31,10 @@ pub enum Command {
     Info(info::Args),
     /// Complex mode indicator function: singular values per line and the picked modes.
     Cmif(cmif::Args),
+    /// Simulate an experiment (the wafer stage) and estimate its FRF.
+    Simulate(simulate::Args),
+    /// Nonparametric FRF from periodic measurements (.mat time records or spectra CSV).
+    Nonparametric(nonparametric::Args),
 }
 
 /// Runs the parsed command line.
@@ -37,5 +43,7 @@ pub fn run(cli: Cli) -> Result<(), FrfitError> {
     match cli.command {
         Command::Info(a) => info::run(a, quiet),
         Command::Cmif(a) => cmif::run(a, quiet),
+        Command::Simulate(a) => simulate::run(a, quiet),
+        Command::Nonparametric(a) => nonparametric::run(a, quiet),
     }
 }

@@ -1,0 +1,254 @@
+//! Reading numeric time records from MATLAB `.mat` (level 5 / v7, compressed or not)
+//! files, as `FORMATS.md` describes them: numeric vectors and matrices among other
+//! variables (structs, cells, strings, MCOS objects such as `tf`) that are skipped.
+//!
+//! The parsing is done by the `matrw` crate: `matfile` 0.5 fails on the whole file as
+//! soon as it holds an MCOS object (for example the `tf` object in
+//! `fditools_motorbench_msA.mat`), `matrw` reports such variables as unsupported and
+//! reads the rest, including doubles stored in a compact integer type.
+
+use crate::{FormatProblem, FrfError};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// A real or complex numeric array (column-major, converted to `f64`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatArray {
+    /// Variable name.
+    pub name: String,
+    /// Dimensions (at least two).
+    pub dims: Vec<usize>,
+    /// Real part, column-major.
+    pub real: Vec<f64>,
+    /// Imaginary part, when the array is complex.
+    pub imag: Option<Vec<f64>>,
+}
+
+impl MatArray {
+    /// Rows (first dimension).
+    pub fn nrows(&self) -> usize {
+        self.dims.first().copied().unwrap_or(0)
+    }
+    /// Columns (product of the other dimensions).
+    pub fn ncols(&self) -> usize {
+        self.dims.iter().skip(1).product()
+    }
+    /// True for a row or column vector.
+    pub fn is_vector(&self) -> bool {
+        self.dims.iter().filter(|&&d| d != 1).count() <= 1
+    }
+}
+
+/// The numeric variables of a `.mat` file and the names of those skipped.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatFile {
+    path: String,
+    arrays: BTreeMap<String, MatArray>,
+    /// Variables that are not numeric arrays, with their kind (`struct`, `cell`,
+    /// `char`, `object`, `sparse`, `logical`).
+    pub skipped: Vec<(String, String)>,
+}
+
+fn to_f64(t: &matrw::MatlabType) -> Option<Vec<f64>> {
+    use matrw::MatlabType as T;
+    Some(match t {
+        T::U8(v) => v.iter().map(|&x| x as f64).collect(),
+        T::I8(v) => v.iter().map(|&x| x as f64).collect(),
+        T::U16(v) => v.iter().map(|&x| x as f64).collect(),
+        T::I16(v) => v.iter().map(|&x| x as f64).collect(),
+        T::U32(v) => v.iter().map(|&x| x as f64).collect(),
+        T::I32(v) => v.iter().map(|&x| x as f64).collect(),
+        T::U64(v) => v.iter().map(|&x| x as f64).collect(),
+        T::I64(v) => v.iter().map(|&x| x as f64).collect(),
+        T::F32(v) => v.iter().map(|&x| x as f64).collect(),
+        T::F64(v) => v.clone(),
+        T::UTF8(_) | T::UTF16(_) | T::BOOL(_) => return None,
+    })
+}
+
+fn kind_of(t: &matrw::MatlabType) -> &'static str {
+    use matrw::MatlabType as T;
+    match t {
+        T::UTF8(_) | T::UTF16(_) => "char",
+        T::BOOL(_) => "logical",
+        _ => "numeric",
+    }
+}
+
+impl MatFile {
+    /// Reads `path`. Errors name the file; a file that is not a level-5 MAT-file (or is
+    /// a v7.3 HDF5 one) is a [`FormatProblem::BadRecord`].
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, FrfError> {
+        let path = path.as_ref();
+        let name = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|e| FrfError::Io {
+            file: name.clone(),
+            message: e.to_string(),
+        })?;
+        Self::from_bytes(&bytes, &name)
+    }
+
+    /// Parses the bytes of a `.mat` file; `name` is used in errors.
+    pub fn from_bytes(bytes: &[u8], name: &str) -> Result<Self, FrfError> {
+        if bytes.len() < 128 {
+            return Err(FrfError::format(
+                name,
+                0,
+                None,
+                FormatProblem::BadRecord,
+                "too short for a MATLAB .mat file (no 128-byte header)",
+            ));
+        }
+        // A parser panic on a malformed file must not take the program down.
+        let parsed = std::panic::catch_unwind(|| matrw::load_matfile_from_u8(bytes));
+        let mat = match parsed {
+            Ok(Ok(m)) => m,
+            Ok(Err(e)) => {
+                return Err(FrfError::format(
+                    name,
+                    0,
+                    None,
+                    FormatProblem::BadRecord,
+                    format!("not a readable MATLAB level-5 (v5/v7) .mat file: {e}"),
+                ))
+            }
+            Err(_) => {
+                return Err(FrfError::format(
+                    name,
+                    0,
+                    None,
+                    FormatProblem::BadRecord,
+                    "malformed MATLAB .mat file (the parser gave up)",
+                ))
+            }
+        };
+        let mut arrays = BTreeMap::new();
+        let mut skipped = Vec::new();
+        for (var_name, var) in mat.iter() {
+            use matrw::MatVariable as V;
+            let kind = match var {
+                V::NumericArray(a) => match to_f64(&a.value) {
+                    Some(real) => {
+                        let imag = a.value_cmp.as_ref().and_then(to_f64);
+                        let mut dims = a.dim.clone();
+                        while dims.len() < 2 {
+                            dims.push(1);
+                        }
+                        if var_name.is_empty() {
+                            // the subsystem data of MCOS objects: no user variable
+                            continue;
+                        }
+                        arrays.insert(
+                            var_name.clone(),
+                            MatArray {
+                                name: var_name.clone(),
+                                dims,
+                                real,
+                                imag,
+                            },
+                        );
+                        continue;
+                    }
+                    None => kind_of(&a.value),
+                },
+                V::SparseArray(_) => "sparse",
+                V::StructureArray(_) | V::Structure(_) => "struct",
+                V::CellArray(_) => "cell",
+                _ => "object",
+            };
+            if !var_name.is_empty() {
+                skipped.push((var_name.clone(), kind.to_string()));
+            }
+        }
+        Ok(Self {
+            path: name.to_string(),
+            arrays,
+            skipped,
+        })
+    }
+
+    /// The path (or name) the file was read from.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    /// Names of the numeric variables.
+    pub fn names(&self) -> Vec<&str> {
+        self.arrays.keys().map(String::as_str).collect()
+    }
+
+    /// The numeric variable `name`.
+    pub fn array(&self, name: &str) -> Result<&MatArray, FrfError> {
+        self.arrays.get(name).ok_or_else(|| {
+            let why = match self.skipped.iter().find(|(n, _)| n == name) {
+                Some((_, kind)) => format!("variable `{name}` is a {kind}, not a numeric array"),
+                None => format!(
+                    "no variable `{name}`; numeric variables: {}",
+                    self.names().join(", ")
+                ),
+            };
+            FrfError::format(&self.path, 0, Some(name), FormatProblem::NotFound, why)
+        })
+    }
+
+    /// A real signal: `name` (a vector) or `name:c` (1-based column `c` of a matrix).
+    pub fn signal(&self, spec: &str) -> Result<Vec<f64>, FrfError> {
+        let (name, col) = match spec.rsplit_once(':') {
+            Some((n, c)) => {
+                let c: usize = c.trim().parse().map_err(|_| {
+                    FrfError::invalid(
+                        "signal",
+                        spec,
+                        "expected NAME or NAME:COLUMN with a 1-based column number",
+                    )
+                })?;
+                (n.trim(), Some(c))
+            }
+            None => (spec.trim(), None),
+        };
+        let a = self.array(name)?;
+        if a.imag.is_some() {
+            return Err(FrfError::format(
+                &self.path,
+                0,
+                Some(name),
+                FormatProblem::BadRecord,
+                format!("variable `{name}` is complex; a time record must be real"),
+            ));
+        }
+        match col {
+            None if a.is_vector() => Ok(a.real.clone()),
+            None => Err(FrfError::format(
+                &self.path,
+                0,
+                Some(name),
+                FormatProblem::BadRecord,
+                format!(
+                    "variable `{name}` is a {:?} matrix; name a column as `{name}:COLUMN`",
+                    a.dims
+                ),
+            )),
+            Some(c) => {
+                let (nr, nc) = (a.nrows(), a.ncols());
+                if c == 0 || c > nc {
+                    return Err(FrfError::format(
+                        &self.path,
+                        0,
+                        Some(name),
+                        FormatProblem::NotFound,
+                        format!("column {c} of `{name}` does not exist (it has {nc} columns)"),
+                    ));
+                }
+                Ok(a.real[(c - 1) * nr..c * nr].to_vec())
+            }
+        }
+    }
+
+    /// A numeric scalar (for example `fs`), when the file holds one of that name.
+    pub fn scalar(&self, name: &str) -> Option<f64> {
+        self.arrays
+            .get(name)
+            .filter(|a| a.real.len() == 1)
+            .map(|a| a.real[0])
+    }
+}
