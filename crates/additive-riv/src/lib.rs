@@ -24,7 +24,10 @@ pub mod model;
 pub mod model_json;
 
 pub use error::RivError;
-pub use model::{AdditiveModel, Domain, KnownFactor, ModeInfo, Submodel, SubmodelKind};
+pub use model::{
+    AdditiveModel, Domain, DynamicsFactor, FactorTarget, KnownFactor, ModeInfo, Submodel,
+    SubmodelKind,
+};
 pub mod numerators;
 pub mod problem;
 pub mod riv;

@@ -197,6 +197,77 @@ impl KnownFactor {
     }
 }
 
+/// Which entries a [`DynamicsFactor`] multiplies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "kind", content = "index", rename_all = "snake_case")]
+pub enum FactorTarget {
+    /// Column `j` (0-based): the dynamics of actuator `j`.
+    Input(usize),
+    /// Row `i` (0-based): the dynamics of sensor `i`.
+    Output(usize),
+    /// Every entry: dynamics common to all actuators (or all sensors).
+    All,
+}
+
+/// A fitted dynamics factor `1 / A(x)` (unit DC gain, `A(x) = 1 + a~_1 x + ...`,
+/// `x = s / scale`) multiplying one input column, one output row or every entry:
+/// actuator or sensor dynamics (a first- or second-order low-pass, say), which no sum
+/// of submodels can represent. Its coefficients are shared parameters of the
+/// iterations, like a fitted delay.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DynamicsFactor {
+    /// The entries it multiplies.
+    pub target: FactorTarget,
+    /// `a~_1 .. a~_n` (scaled).
+    pub den: Vec<f64>,
+    /// `sigma` of `x = s / sigma`, rad/s.
+    pub scale: f64,
+}
+
+impl DynamicsFactor {
+    /// A first-order low-pass with corner `f_hz`: `1 / (1 + s / w_c)`.
+    pub fn first_order(target: FactorTarget, f_hz: f64) -> Self {
+        Self {
+            target,
+            den: vec![1.0],
+            scale: TAU * f_hz,
+        }
+    }
+    /// A second-order low-pass `1 / (1 + 2 zeta s / w + s^2 / w^2)`.
+    pub fn second_order(target: FactorTarget, f_hz: f64, zeta: f64) -> Self {
+        Self {
+            target,
+            den: vec![2.0 * zeta, 1.0],
+            scale: TAU * f_hz,
+        }
+    }
+    /// `A(j w / scale)`.
+    #[inline]
+    pub fn den_at(&self, omega: f64) -> C64 {
+        let x = C64::new(0.0, omega / self.scale);
+        let mut acc = C64::new(0.0, 0.0);
+        for &a in self.den.iter().rev() {
+            acc = (acc + a) * x;
+        }
+        acc + 1.0
+    }
+    /// True when the factor multiplies entry (`i`, `j`).
+    #[inline]
+    pub fn affects(&self, i: usize, j: usize) -> bool {
+        match self.target {
+            FactorTarget::Input(c) => c == j,
+            FactorTarget::Output(r) => r == i,
+            FactorTarget::All => true,
+        }
+    }
+    /// The poles of the factor, rad/s.
+    pub fn poles(&self) -> Vec<C64> {
+        poly_roots_ascending(&self.den)
+            .map(|r| r.into_iter().map(|x| x * self.scale).collect())
+            .unwrap_or_default()
+    }
+}
+
 /// Modal summary of a mode submodel.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ModeInfo {
@@ -218,6 +289,8 @@ pub struct AdditiveModel {
     pub submodels: Vec<Submodel>,
     /// The known factor that multiplies the rational part.
     pub factor: KnownFactor,
+    /// Fitted dynamics factors of input columns or output rows.
+    pub dynamics: Vec<DynamicsFactor>,
 }
 
 impl AdditiveModel {
@@ -241,6 +314,7 @@ impl AdditiveModel {
             domain,
             submodels: Vec::new(),
             factor: KnownFactor::default(),
+            dynamics: Vec::new(),
         })
     }
 
@@ -442,6 +516,48 @@ impl AdditiveModel {
             Domain::Continuous => C64::new(0.0, omega / sub.scale),
             Domain::ZohDiscrete { ts } => C64::from_polar(1.0, -omega * ts),
         }
+    }
+
+    /// Adds a dynamics factor (checked: target in range, finite coefficients, scale > 0).
+    pub fn push_dynamics(&mut self, f: DynamicsFactor) -> Result<usize, RivError> {
+        match f.target {
+            FactorTarget::Input(j) if j >= self.nu => {
+                return Err(RivError::invalid(
+                    "factor input",
+                    j + 1,
+                    format!("the model has {} inputs", self.nu),
+                ))
+            }
+            FactorTarget::Output(i) if i >= self.ny => {
+                return Err(RivError::invalid(
+                    "factor output",
+                    i + 1,
+                    format!("the model has {} outputs", self.ny),
+                ))
+            }
+            _ => {}
+        }
+        if f.den.is_empty() || f.den.iter().any(|a| !a.is_finite()) {
+            return Err(RivError::Structure(
+                "a dynamics factor needs finite coefficients".into(),
+            ));
+        }
+        check_scale(f.scale)?;
+        self.dynamics.push(f);
+        Ok(self.dynamics.len() - 1)
+    }
+
+    /// The factor of entry (`i`, `j`) at `omega`: the known factor times the dynamics
+    /// factors that multiply that entry.
+    #[inline]
+    pub fn entry_factor(&self, omega: f64, i: usize, j: usize) -> C64 {
+        let mut f = self.factor.at(omega);
+        for d in &self.dynamics {
+            if d.affects(i, j) {
+                f /= d.den_at(omega);
+            }
+        }
+        f
     }
 
     /// The integrator factor `x^l` (continuous) or `(1 - q)^l` (discrete) at `x`.
@@ -1001,9 +1117,11 @@ impl ModelStructure for AdditiveModel {
             .map(|i| self.n_params_of(i))
             .sum::<usize>()
             + usize::from(self.factor.fit_delay)
+            + self.dynamics.iter().map(|d| d.den.len()).sum::<usize>()
     }
     /// Per submodel the paper's form (6) `[a_1..a_n, vec(B_0), ..]` (unscaled), in
-    /// submodel order, then the delay (seconds) when it is a free parameter.
+    /// submodel order, then the delay (seconds) when it is a free parameter, then the
+    /// coefficients `a_r` (unscaled, `s^r` units) of each dynamics factor.
     fn params(&self) -> Vec<f64> {
         let mut p = Vec::with_capacity(self.n_params());
         for i in 0..self.submodels.len() {
@@ -1011,6 +1129,11 @@ impl ModelStructure for AdditiveModel {
         }
         if self.factor.fit_delay {
             p.push(self.factor.delay_s);
+        }
+        for d in &self.dynamics {
+            for (r, a) in d.den.iter().enumerate() {
+                p.push(a / d.scale.powi(r as i32 + 1));
+            }
         }
         p
     }
@@ -1038,6 +1161,13 @@ impl ModelStructure for AdditiveModel {
         }
         if self.factor.fit_delay {
             self.factor.delay_s = params[off];
+            off += 1;
+        }
+        for d in &mut self.dynamics {
+            for (r, a) in d.den.iter_mut().enumerate() {
+                *a = params[off] * d.scale.powi(r as i32 + 1);
+                off += 1;
+            }
         }
         Ok(())
     }
@@ -1047,6 +1177,16 @@ impl ModelStructure for AdditiveModel {
             let f = self.factor.at(omega);
             for v in out.iter_mut() {
                 *v *= f;
+            }
+        }
+        for d in &self.dynamics {
+            let h = d.den_at(omega).inv();
+            for j in 0..self.nu {
+                for i in 0..self.ny {
+                    if d.affects(i, j) {
+                        out[j * self.ny + i] *= h;
+                    }
+                }
             }
         }
     }

@@ -140,6 +140,10 @@ pub struct ModelFile {
     pub order: usize,
     /// The submodels exactly as fitted.
     pub submodels: Vec<SubmodelJson>,
+    /// Fitted dynamics factors of input columns or output rows (not part of the modal
+    /// form, like the delay): `1 / (1 + a~_1 s/scale + ...)`.
+    #[serde(default)]
+    pub dynamics: Vec<crate::model::DynamicsFactor>,
     /// How the model was obtained.
     pub provenance: Provenance,
 }
@@ -239,6 +243,7 @@ impl ModelFile {
                     num_poly: s.num_poly.clone(),
                 })
                 .collect(),
+            dynamics: model.dynamics.clone(),
             provenance,
         })
     }
@@ -275,6 +280,9 @@ impl ModelFile {
                 derivative_order: self.derivative_order,
                 sinc_hold_fs: sinc,
             })?;
+        for d in &self.dynamics {
+            m.push_dynamics(d.clone())?;
+        }
         for (i, s) in self.submodels.iter().enumerate() {
             let num = s
                 .num

@@ -139,8 +139,10 @@ pub struct Layout {
     pub n_num: usize,
     /// Denominator coefficients (all submodels).
     pub n_den: usize,
-    /// Whether the delay is the last shared parameter.
+    /// Whether the delay follows the denominators among the shared parameters.
     pub fit_delay: bool,
+    /// Coefficients of the dynamics factors (last among the shared parameters).
+    pub n_factor: usize,
 }
 
 impl Layout {
@@ -161,11 +163,16 @@ impl Layout {
             n_num: nn,
             n_den: nd,
             fit_delay: model.factor.fit_delay,
+            n_factor: model.dynamics.iter().map(|d| d.den.len()).sum(),
         }
     }
-    /// Shared parameters: denominators plus the delay when fitted.
+    /// Shared parameters: denominators, the delay when fitted, the dynamics factors.
     pub fn n_shared(&self) -> usize {
-        self.n_den + usize::from(self.fit_delay)
+        self.n_den + usize::from(self.fit_delay) + self.n_factor
+    }
+    /// Index of the first factor parameter (delay, then dynamics) among the shared ones.
+    pub fn factor_offset(&self) -> usize {
+        self.n_den
     }
     /// Total parameters for `m` entries.
     pub fn n_total(&self, m: usize) -> usize {
@@ -186,6 +193,9 @@ pub fn pack(model: &AdditiveModel, lay: &Layout) -> (Vec<f64>, Vec<f64>) {
     }
     if lay.fit_delay {
         shared.push(model.factor.delay_s);
+    }
+    for d in &model.dynamics {
+        shared.extend_from_slice(&d.den);
     }
     let mut eta = vec![0.0; m * lay.n_num];
     for (i, s) in model.submodels.iter().enumerate() {
@@ -220,8 +230,15 @@ pub fn unpack(model: &mut AdditiveModel, lay: &Layout, shared: &[f64], eta: &[f6
             }
         }
     }
+    let mut off = lay.n_den;
     if lay.fit_delay {
-        model.factor.delay_s = shared[lay.n_den];
+        model.factor.delay_s = shared[off];
+        off += 1;
+    }
+    for d in &mut model.dynamics {
+        let n = d.den.len();
+        d.den.copy_from_slice(&shared[off..off + n]);
+        off += n;
     }
 }
 
@@ -244,23 +261,35 @@ pub struct Basis {
     pub d_re: Vec<f64>,
     /// `Im d_d(k)` at `[d * n + k]`.
     pub d_im: Vec<f64>,
-    /// Known factor `F_k`.
+    /// The factor of each entry `F_ke` (known factor times dynamics factors) at
+    /// `[e * n + k]`.
     pub f: Vec<C64>,
-    /// `|F_k|`.
+    /// `|F_ke|`.
     pub f_abs: Vec<f64>,
-    /// `1 / F_k`.
+    /// `1 / F_ke`.
     pub f_inv: Vec<C64>,
+    /// For each fitted factor parameter `q` (delay, then dynamics coefficients):
+    /// `d ln F / d theta_q` at `[q * n + k]` (the same for every entry it affects).
+    pub dlnf: Vec<C64>,
+    /// Whether factor parameter `q` affects entry `e`: `[q * m + e]`.
+    pub dlnf_mask: Vec<bool>,
 }
 
 impl Basis {
     /// Evaluates the basis of `model` at `omega`.
     pub fn new(model: &AdditiveModel, lay: &Layout, omega: &[f64]) -> Self {
         let n = omega.len();
+        let ny = frf_data::ModelStructure::ny(model);
+        let nu = frf_data::ModelStructure::nu(model);
+        let m = ny * nu;
         let mut u_re = vec![0.0; n * lay.n_num];
         let mut u_im = vec![0.0; n * lay.n_num];
         let mut d_re = vec![0.0; n * lay.n_den];
         let mut d_im = vec![0.0; n * lay.n_den];
-        let mut f = Vec::with_capacity(n);
+        let mut f = vec![C64::new(0.0, 0.0); n * m];
+        let n_fp = usize::from(lay.fit_delay) + lay.n_factor;
+        let mut dlnf = vec![C64::new(0.0, 0.0); n * n_fp];
+        let mut dlnf_mask = vec![false; n_fp * m];
         for (k, &w) in omega.iter().enumerate() {
             for (i, s) in model.submodels.iter().enumerate() {
                 let x = model.variable(s, w);
@@ -284,7 +313,50 @@ impl Basis {
                     xr *= x;
                 }
             }
-            f.push(model.factor.at(w));
+            let f0 = model.factor.at(w);
+            for e in 0..m {
+                f[e * n + k] = f0;
+            }
+            let mut q = 0;
+            if lay.fit_delay {
+                // ln F = -j w tau + ...
+                dlnf[q * n + k] = C64::new(0.0, -w);
+                q += 1;
+            }
+            for dynf in &model.dynamics {
+                let a = dynf.den_at(w);
+                let ia = a.inv();
+                for j in 0..nu {
+                    for i in 0..ny {
+                        if dynf.affects(i, j) {
+                            f[(j * ny + i) * n + k] *= ia;
+                        }
+                    }
+                }
+                // ln F = -ln A(x) + ...: d/d a~_r = -x^r / A(x)
+                let x = C64::new(0.0, w / dynf.scale);
+                let mut xr = x;
+                for _ in 0..dynf.den.len() {
+                    dlnf[q * n + k] = -xr * ia;
+                    xr *= x;
+                    q += 1;
+                }
+            }
+        }
+        let mut q = 0;
+        if lay.fit_delay {
+            dlnf_mask[..m].fill(true);
+            q += 1;
+        }
+        for dynf in &model.dynamics {
+            for _ in 0..dynf.den.len() {
+                for j in 0..nu {
+                    for i in 0..ny {
+                        dlnf_mask[q * m + j * ny + i] = dynf.affects(i, j);
+                    }
+                }
+                q += 1;
+            }
         }
         let f_abs = f.iter().map(|z| z.norm()).collect();
         let f_inv = f.iter().map(|z| z.inv()).collect();
@@ -297,6 +369,8 @@ impl Basis {
             f,
             f_abs,
             f_inv,
+            dlnf,
+            dlnf_mask,
         }
     }
 
@@ -353,11 +427,12 @@ impl EntryLines {
         let gr = &data.g_re[e * n..(e + 1) * n];
         let gi = &data.g_im[e * n..(e + 1) * n];
         let sw = &data.sqrt_w[e * n..(e + 1) * n];
+        let fi = &basis.f_inv[e * n..(e + 1) * n];
+        let fa = &basis.f_abs[e * n..(e + 1) * n];
         for k in 0..n {
-            let fi = basis.f_inv[k];
-            self.y_re[k] = gr[k] * fi.re - gi[k] * fi.im;
-            self.y_im[k] = gr[k] * fi.im + gi[k] * fi.re;
-            self.s[k] = sw[k] * basis.f_abs[k];
+            self.y_re[k] = gr[k] * fi[k].re - gi[k] * fi[k].im;
+            self.y_im[k] = gr[k] * fi[k].im + gi[k] * fi[k].re;
+            self.s[k] = sw[k] * fa[k];
         }
         self.e_re.copy_from_slice(&self.y_re);
         self.e_im.copy_from_slice(&self.y_im);
@@ -432,7 +507,7 @@ pub fn cost(
                 total += el.cost();
                 for k in 0..n {
                     // E of the undivided problem: F (y - P)
-                    r[k * m + e] = basis.f[k] * C64::new(el.e_re[k], el.e_im[k]);
+                    r[k * m + e] = basis.f[e * n + k] * C64::new(el.e_re[k], el.e_im[k]);
                 }
             }
             total

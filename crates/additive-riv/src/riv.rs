@@ -250,6 +250,10 @@ pub fn iterate(
             let tau = shared[lay.n_den];
             rel = rel.max(d_s[lay.n_den].abs() / tau.abs().max(1e-6));
         }
+        if lay.n_factor > 0 {
+            let f0 = lay.n_shared() - lay.n_factor;
+            rel = rel.max(rel_norm(&d_s[f0..], &shared[f0..]));
+        }
         let rel_cost = (c - c_new).abs() / c.max(f64::MIN_POSITIVE);
         shared = s_new;
         eta = e_new;

@@ -71,6 +71,7 @@ pub struct StepUpdate {
 /// contiguous lines. `y` and `x` must be `2n x (nn + ns)` and `2n x (nn + ns + 1)`;
 /// `el` holds the entry's lines after [`EntryLines::fill`].
 fn fill_entry(
+    e: usize,
     data: &FitData,
     lay: &Layout,
     den_groups: &[(usize, usize)],
@@ -126,28 +127,43 @@ fn fill_entry(
             }
         }
     }
-    if lay.fit_delay {
-        // d(G/F - P)/d tau = j w y: regressor -j w y, instrument -j w P (SK: -j w y)
+    // factor parameters (delay, dynamics): d(y - P)/d theta = -y d ln F / d theta, so
+    // the regressor is y d ln F and the instrument P d ln F (SK: y d ln F)
+    let m = data.m();
+    let n_fp = ns - nd;
+    for q in 0..n_fp {
+        let on = basis.dlnf_mask[q * m + e];
+        let dl = &basis.dlnf[q * n..(q + 1) * n];
         {
-            let col = x.col_as_slice_mut(nn + nd);
+            let col = x.col_as_slice_mut(nn + nd + q);
             let (cr, ci) = col.split_at_mut(n);
             for k in 0..n {
-                let w = data.omega[k] * s[k];
-                cr[k] = w * el.y_im[k];
-                ci[k] = -w * el.y_re[k];
+                if on {
+                    let (yr, yi) = (el.y_re[k] * s[k], el.y_im[k] * s[k]);
+                    cr[k] = dl[k].re * yr - dl[k].im * yi;
+                    ci[k] = dl[k].re * yi + dl[k].im * yr;
+                } else {
+                    cr[k] = 0.0;
+                    ci[k] = 0.0;
+                }
             }
         }
-        let col = y.col_as_slice_mut(nn + nd);
+        let col = y.col_as_slice_mut(nn + nd + q);
         let (cr, ci) = col.split_at_mut(n);
         for k in 0..n {
-            let w = data.omega[k] * s[k];
-            let (pr, pi) = if method == IvMethod::Riv {
-                (el.y_re[k] - el.e_re[k], el.y_im[k] - el.e_im[k])
+            if on {
+                let (pr, pi) = if method == IvMethod::Riv {
+                    (el.y_re[k] - el.e_re[k], el.y_im[k] - el.e_im[k])
+                } else {
+                    (el.y_re[k], el.y_im[k])
+                };
+                let (pr, pi) = (pr * s[k], pi * s[k]);
+                cr[k] = dl[k].re * pr - dl[k].im * pi;
+                ci[k] = dl[k].re * pi + dl[k].im * pr;
             } else {
-                (el.y_re[k], el.y_im[k])
-            };
-            cr[k] = w * pi;
-            ci[k] = -w * pr;
+                cr[k] = 0.0;
+                ci[k] = 0.0;
+            }
         }
     }
     let col = x.col_as_slice_mut(nn + ns);
@@ -227,7 +243,7 @@ fn step_structured(
      -> Result<EntryParts, RivError> {
         let (y, x, z, el) = bufs;
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        fill_entry(data, lay, &dg, basis, el, method, y, x);
+        fill_entry(e, data, lay, &dg, basis, el, method, y, x);
         // Z = Y^T X : (nn + ns) x (nn + ns + 1)
         matmul(
             z.as_mut(),
@@ -379,7 +395,7 @@ fn step_dense(
     let mut el = EntryLines::default();
     for e in 0..m {
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        fill_entry(data, lay, &dg, basis, &el, method, &mut y, &mut x);
+        fill_entry(e, data, lay, &dg, basis, &el, method, &mut y, &mut x);
         for row in 0..2 * n {
             let rr = e * 2 * n + row;
             for c in 0..ns {

@@ -114,3 +114,67 @@ fn error_shrinks_with_noise() {
         );
     }
 }
+
+/// A first-order actuator factor on one input column and a delay, both fitted as shared
+/// parameters, are recovered from noise-free data.
+#[test]
+fn dynamics_factor_and_delay_recovered() {
+    use additive_riv::{DynamicsFactor, FactorTarget, KnownFactor};
+    use frf_data::ModelStructure;
+    for (seed, target) in [
+        (11u64, FactorTarget::Input(1)),
+        (12, FactorTarget::Output(0)),
+        (13, FactorTarget::All),
+    ] {
+        let case = random_case(seed, 2, 3, 3, true, Domain::Continuous);
+        let mut truth = case
+            .truth
+            .clone()
+            .with_factor(KnownFactor {
+                delay_s: 3e-4,
+                fit_delay: true,
+                ..Default::default()
+            })
+            .unwrap();
+        truth
+            .push_dynamics(DynamicsFactor::first_order(target, 150.0))
+            .unwrap();
+        let data = simulate(&truth, &case.freqs, 0.0, seed);
+        let fd = FitData::new(&data, &Weighting::InverseMagnitude).unwrap();
+        let mut start = perturbed_start(&case, 0.01, seed)
+            .with_factor(KnownFactor {
+                delay_s: 2.5e-4,
+                fit_delay: true,
+                ..Default::default()
+            })
+            .unwrap();
+        start
+            .push_dynamics(DynamicsFactor::first_order(target, 120.0))
+            .unwrap();
+        fit_numerators(&mut start, &fd).unwrap();
+        let f = AdditiveRiv::new(RivConfig::default())
+            .refine(start, &fd)
+            .unwrap();
+        assert!(
+            f.convergence.is_converged(),
+            "{target:?}: {:?}",
+            f.convergence
+        );
+        let (p, q) = (f.model.params(), truth.params());
+        let n = p.len();
+        // delay and the factor coefficient are the last two parameters
+        assert!(
+            (p[n - 2] - q[n - 2]).abs() < 1e-12,
+            "{target:?}: delay {} vs {}",
+            p[n - 2],
+            q[n - 2]
+        );
+        assert!(
+            (p[n - 1] / q[n - 1] - 1.0).abs() < 1e-8,
+            "{target:?}: factor {} vs {}",
+            p[n - 1],
+            q[n - 1]
+        );
+        assert!(max_rel_param_error(&f.model, &truth) < 1e-8);
+    }
+}
