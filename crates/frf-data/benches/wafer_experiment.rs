@@ -7,6 +7,7 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use frf_data::synth::WaferStageExperiment;
 use std::hint::black_box;
+use std::time::Duration;
 
 fn wafer_experiment(c: &mut Criterion) {
     // faer's own threading never pays on these small per-line problems
@@ -18,6 +19,7 @@ fn wafer_experiment(c: &mut Criterion) {
         |b| b.iter(|| WaferStageExperiment::default_with(black_box(1), 10, 10).expect("builds")),
     );
     let w = WaferStageExperiment::default_with(1, 10, 10).expect("builds");
+    g.measurement_time(Duration::from_secs(90));
     g.bench_function(
         "default experiment 13 x 10 periods x 10 realizations + estimate",
         |b| b.iter(|| w.run().expect("runs")),

@@ -435,3 +435,94 @@ pub fn estimate(
     out.frf.units = spectra.units.clone();
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::FrfDataset;
+    use proptest::prelude::*;
+
+    /// Noise-free spectra `Y_p = G U_p` with inputs that change from period to period.
+    fn spectra(
+        g: &[C64],
+        ny: usize,
+        nu: usize,
+        ne: usize,
+        np: usize,
+        u: &[C64],
+    ) -> RealizationSpectra {
+        let nl = 1;
+        let mut input = Vec::new();
+        let mut output = Vec::new();
+        for e in 0..ne {
+            for p in 0..np {
+                let up: Vec<C64> = (0..nu)
+                    .map(|j| {
+                        u[e * nu + j] * (1.0 + 0.1 * p as f64)
+                            + C64::new(0.01 * (p * j) as f64, 0.0)
+                    })
+                    .collect();
+                for i in 0..ny {
+                    output.push((0..nu).map(|j| g[j * ny + i] * up[j]).sum::<C64>());
+                }
+                input.extend(up);
+            }
+        }
+        // output was pushed per (e, p) with ny values: layout [e][p][line][ny] with one line
+        RealizationSpectra::new(ne, np, nl, ny, nu, input, output, None).unwrap()
+    }
+
+    proptest! {
+        #[test]
+        fn noise_free_data_give_the_frf_exactly(
+            ny in 1usize..4, nu in 1usize..4, extra in 0usize..2, np in 2usize..4,
+            vals in proptest::collection::vec(-1.0f64..1.0, 80),
+        ) {
+            let ne = nu + extra;
+            let g: Vec<C64> = (0..ny * nu).map(|i| C64::new(vals[2 * i], vals[2 * i + 1])).collect();
+            // diagonally dominant inputs: well conditioned
+            let u: Vec<C64> = (0..ne * nu)
+                .map(|i| {
+                    let (e, j) = (i / nu, i % nu);
+                    let d = if e == j { 3.0 } else { 0.0 };
+                    C64::new(d + vals[40 + i % 40] * 0.5, vals[(i * 7) % 40] * 0.5)
+                })
+                .collect();
+            let rs = spectra(&g, ny, nu, ne, np, &u);
+            let mut acc = Accumulator::new(vec![1.0], ny, nu, ne, EstimatorConfig::default()).unwrap();
+            acc.add(&rs).unwrap();
+            let est = acc.finish().unwrap();
+            for i in 0..ny {
+                for j in 0..nu {
+                    let d = (est.frf.value(0, i, j) - g[j * ny + i]).norm();
+                    prop_assert!(d < 1e-12, "entry ({i}, {j}) off by {d}");
+                    prop_assert!(est.frf.variance(0, i, j).unwrap() < 1e-24);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn siso_estimate_is_the_ratio_of_period_means_with_the_eiv_variance() {
+        // G = mean(Y) / mean(U); var = sum |Y_p - G U_p|^2 / (P (P - 1) |mean U|^2)
+        let u = [C64::new(1.0, 0.5), C64::new(1.1, 0.4), C64::new(0.9, 0.55)];
+        let y = [C64::new(2.0, 0.0), C64::new(2.3, -0.1), C64::new(1.8, 0.2)];
+        let rs = RealizationSpectra::new(1, 3, 1, 1, 1, u.to_vec(), y.to_vec(), None).unwrap();
+        let mut acc = Accumulator::new(vec![5.0], 1, 1, 1, EstimatorConfig::default()).unwrap();
+        acc.add(&rs).unwrap();
+        let est = acc.finish().unwrap();
+        let (um, ym) = (u.iter().sum::<C64>() / 3.0, y.iter().sum::<C64>() / 3.0);
+        let g = ym / um;
+        let v: f64 = u
+            .iter()
+            .zip(&y)
+            .map(|(a, b)| (b - g * a).norm_sqr())
+            .sum::<f64>()
+            / (3.0 * 2.0)
+            / um.norm_sqr();
+        assert!((est.frf.value(0, 0, 0) - g).norm() < 1e-15);
+        assert!((est.frf.variance(0, 0, 0).unwrap() - v).abs() < 1e-12 * v);
+        assert!(est.total_variance.is_none());
+        assert_eq!(est.frf.metadata["variance"], "noise (period spread)");
+    }
+}

@@ -856,9 +856,12 @@ struct ExperimentSpectra {
     time: Option<(Records, Records)>,
 }
 
-/// The largest modulus of the poles of the sampled closed loop: plant realisation
-/// (exact ZOH), `ceil(delay)` samples of delay on every input, the controller. Fails with
-/// [`FrfError::UnstableClosedLoop`] when it is `>= 1 - 1e-12`.
+/// The largest modulus of the poles of the sampled closed loop `u = r - K y`
+/// (McKelvey, Section 3.5): plant realisation (exact ZOH, the discrete system of
+/// eq. (6)), `ceil(delay)` samples of delay on every input (a fractional delay is
+/// rounded up for this check), the controller. The periodic steady state of eq. (8)
+/// exists only when it is `< 1`; otherwise this fails with
+/// [`FrfError::UnstableClosedLoop`] (threshold `1 - 1e-12`).
 pub fn closed_loop_spectral_radius(
     plant: &ModalPlant,
     controller: &RigidBodyController,

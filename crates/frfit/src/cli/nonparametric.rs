@@ -201,6 +201,76 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
 mod tests {
     use super::*;
 
+    fn base(files: Vec<PathBuf>, out: PathBuf) -> Args {
+        Args {
+            files,
+            input: vec!["iq_adx".into()],
+            output: vec!["theta_mx".into(), "-theta_my".into()],
+            fs: None,
+            period: Some(2500),
+            drop_periods: 1,
+            line_threshold_db: 40.0,
+            out,
+        }
+    }
+
+    #[test]
+    fn reproduces_the_motor_bench_frf_from_the_mat_file_and_the_spectra() {
+        let Some(mat) =
+            frf_data::shared_data::require("cli_nonparametric", "real/fditools_motorbench_msA.mat")
+        else {
+            return;
+        };
+        let Some(per) = frf_data::shared_data::require(
+            "cli_nonparametric",
+            "real/fditools_motorbench_msA.periods.csv",
+        ) else {
+            return;
+        };
+        let Some(refp) =
+            frf_data::shared_data::require("cli_nonparametric", "real/fditools_motorbench_msA.csv")
+        else {
+            return;
+        };
+        let reference = frf_data::io::read_frf_csv(&refp).unwrap();
+        let dir = std::env::temp_dir().join(format!("frfit_np_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // fs from the file's scalar `fs`, y2 sign flipped as in the reference
+        let out = dir.join("mat.csv");
+        run(base(vec![mat.clone()], out.clone()), true).unwrap();
+        let out2 = dir.join("per.csv");
+        let mut a = base(vec![per], out2.clone());
+        a.input.clear();
+        a.output.clear();
+        run(a, true).unwrap();
+        for o in [out, out2] {
+            let est = frf_data::io::read_frf_csv(&o).unwrap();
+            assert_eq!(est.freqs_hz(), reference.freqs_hz());
+            for k in 0..est.n_lines() {
+                for i in 0..2 {
+                    let (g, g0) = (est.value(k, i, 0), reference.value(k, i, 0));
+                    assert!((g - g0).norm() < 1e-6 * g0.norm());
+                    let (v, v0) = (
+                        est.variance(k, i, 0).unwrap(),
+                        reference.variance(k, i, 0).unwrap(),
+                    );
+                    assert!((v - v0).abs() < 0.1 * v0);
+                }
+            }
+        }
+        // errors: a struct variable, no period, unknown signal
+        let mut a = base(vec![mat.clone()], dir.join("x.csv"));
+        a.output = vec!["ms".into()];
+        assert!(run(a, true).unwrap_err().to_string().contains("struct"));
+        let mut a = base(vec![mat.clone()], dir.join("x.csv"));
+        a.period = None;
+        assert!(run(a, true).is_err());
+        let mut a = base(vec![mat], dir.join("x.csv"));
+        a.input = vec!["nothere".into()];
+        assert!(run(a, true).unwrap_err().to_string().contains("nothere"));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
     #[test]
     fn signed_names() {
         assert_eq!(signed("-theta_my"), (-1.0, "theta_my"));

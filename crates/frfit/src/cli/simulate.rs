@@ -214,3 +214,91 @@ fn run_wafer(a: WaferArgs, quiet: bool) -> Result<(), FrfitError> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frf_data::truth::Truth;
+
+    fn args(dir: &std::path::Path) -> WaferArgs {
+        WaferArgs {
+            seed: 3,
+            periods: 2,
+            realizations: 2,
+            out: dir.join("ws.csv"),
+            truth: Some(dir.join("ws.truth.json")),
+            noiseless: Some(dir.join("ws.noiseless.csv")),
+            spectra: Some(dir.join("ws.spectra.csv")),
+            f_max: 500.0,
+            period: 2000,
+            rms: 2.0,
+            noise_nm: 1.0,
+            drift_nm: 5.0,
+            drift_corner_hz: 0.5,
+            input_noise: 0.0,
+            nonlinearity: 0.0,
+            bandwidth_hz: 20.0,
+            path: PathArg::Frequency,
+        }
+    }
+
+    #[test]
+    fn writes_the_estimate_truth_noiseless_response_and_spectra() {
+        let dir = std::env::temp_dir().join(format!("frfit_simulate_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let a = args(&dir);
+        run(
+            Args {
+                target: Target::WaferStage(a),
+            },
+            true,
+        )
+        .unwrap();
+        let est = frf_data::io::read_frf_csv(dir.join("ws.csv")).unwrap();
+        assert_eq!((est.ny(), est.nu(), est.n_lines()), (4, 13, 50));
+        assert!(est.has_variance());
+        assert_eq!(est.units(), Some("m/N"));
+        let truth = Truth::read(dir.join("ws.truth.json")).unwrap();
+        assert_eq!(truth.seed, 3);
+        assert_eq!(truth.model.modes.len(), 17);
+        let exact = frf_data::io::read_frf_csv(dir.join("ws.noiseless.csv")).unwrap();
+        // the estimate is within a few standard deviations of the exact response
+        let (mut e, mut v) = (0.0, 0.0);
+        for k in 0..est.n_lines() {
+            for i in 0..4 {
+                for j in 0..13 {
+                    e += (est.value(k, i, j) - exact.value(k, i, j)).norm_sqr();
+                    v += est.variance(k, i, j).unwrap();
+                }
+            }
+        }
+        assert!(e / v < 4.0, "{}", e / v);
+        let spectra =
+            frf_data::nonparametric::spectra_csv::read_spectra_csv(dir.join("ws.spectra.csv"))
+                .unwrap();
+        assert_eq!(spectra.realizations.len(), 2);
+        assert_eq!(spectra.n_experiments(), 13);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn bad_settings_are_errors() {
+        let dir = std::env::temp_dir().join(format!("frfit_simulate_bad_{}", std::process::id()));
+        for f in [
+            (|a: &mut WaferArgs| a.periods = 0) as fn(&mut WaferArgs),
+            |a| a.f_max = 0.1,
+            |a| a.bandwidth_hz = 400.0,
+            |a| a.rms = -1.0,
+        ] {
+            let mut a = args(&dir);
+            f(&mut a);
+            let e = run(
+                Args {
+                    target: Target::WaferStage(a),
+                },
+                true,
+            );
+            assert!(e.is_err());
+        }
+    }
+}
