@@ -7,6 +7,7 @@
 
 pub mod error;
 pub mod plots;
+pub mod summary;
 
 pub use error::FrfitError;
 

@@ -1,0 +1,183 @@
+//! `summary.json`: the machine-readable result of a fit or a diagnosis, with the same
+//! content as `report.md` (schema documented in the README).
+//!
+//! Schema `frfit-summary`, version 1:
+//!
+//! ```text
+//! { "schema": "frfit-summary", "version": 1,
+//!   "command": "diagnose" | "fit",
+//!   "data": {path, ny, nu, lines, band_hz: [lo, hi], units, noise_source},
+//!   "initial": {modes: [{f_hz, zeta}], cmif_peaks: [{f_hz, sv_index, prominence}],
+//!               errors: {median_rel, p95_rel, residual_to_noise}},
+//!   "steps": [{effect, accepted, evidence, params, uncertainty, f_statistic, f_critical,
+//!              added_params, before: {..errors}, after: {..errors}, figure}],
+//!   "verdict": "noise_limited" | "unexplained_residual", "verdict_evidence": "...",
+//!   "final_model": {modes: [{f_hz, zeta}], order, delay_s, hold, rigid_body_integrators,
+//!                   feedthrough, dynamics: [..], iterations, convergence},
+//!   "final": {median_rel, p95_rel, residual_to_noise},
+//!   "data_noise_median_rel": ..., "timings": [{stage, seconds}] }
+//! ```
+
+use serde::{Deserialize, Serialize};
+
+/// The schema tag.
+pub const SCHEMA: &str = "frfit-summary";
+/// The schema version.
+pub const VERSION: u32 = 1;
+
+/// Error of a model against the data.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct ErrorStats {
+    /// Median over lines and entries of `|G - P| / |G|`.
+    pub median_rel: f64,
+    /// 95th percentile of `|G - P| / |G|`.
+    pub p95_rel: f64,
+    /// `sqrt(mean |G - P|^2 / var)`: 1 at the noise level.
+    pub residual_to_noise: f64,
+}
+
+/// Mode frequency and damping.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ModeSummary {
+    /// Natural frequency, Hz.
+    pub f_hz: f64,
+    /// Relative damping.
+    pub zeta: f64,
+}
+
+/// One CMIF peak.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PeakSummary {
+    /// Frequency, Hz.
+    pub f_hz: f64,
+    /// Which singular value (0 = largest).
+    pub sv_index: usize,
+    /// Prominence, dB.
+    pub prominence: f64,
+}
+
+/// The data the run worked on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DataSummary {
+    /// The file.
+    pub path: String,
+    /// Outputs.
+    pub ny: usize,
+    /// Inputs.
+    pub nu: usize,
+    /// Lines in the band.
+    pub lines: usize,
+    /// Band fitted, Hz.
+    pub band_hz: [f64; 2],
+    /// Units, when known.
+    pub units: Option<String>,
+    /// `measured` (from `_var`) or how it was estimated.
+    pub noise_source: String,
+    /// The FRF type the model was fitted as (`displacement`, `velocity`, `accelerance`).
+    pub frf_type: String,
+}
+
+/// The model before the diagnosis loop.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InitialSummary {
+    /// Modes of the first model.
+    pub modes: Vec<ModeSummary>,
+    /// The CMIF peaks it started from.
+    pub cmif_peaks: Vec<PeakSummary>,
+    /// Its error against the data.
+    pub errors: ErrorStats,
+    /// Declared (known) effects: hold, delay, from the command line or the file.
+    pub declared: Vec<String>,
+}
+
+/// One step of the diagnosis loop: a candidate effect, tested.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepSummary {
+    /// `missed_mode`, `delay`, `hold`, `feedthrough`, `stiffness`, `input_dynamics` or
+    /// `output_dynamics`.
+    pub effect: String,
+    /// Whether the effect was added to the model.
+    pub accepted: bool,
+    /// Why the effect was a candidate (what the residual showed), in words with numbers.
+    pub evidence: String,
+    /// Its estimated parameters (`f_hz`, `zeta`; `seconds`; `fs_hz`; `inputs`, `poles`...).
+    pub params: serde_json::Value,
+    /// Standard deviations of the parameters where available.
+    pub uncertainty: Option<serde_json::Value>,
+    /// F statistic of the refit (the cost explained per added parameter over the noise
+    /// scale).
+    pub f_statistic: f64,
+    /// The critical value it had to pass.
+    pub f_critical: f64,
+    /// Real parameters the effect adds.
+    pub added_params: usize,
+    /// Error before the step.
+    pub before: ErrorStats,
+    /// Error after the refit with the effect (whether or not it was accepted).
+    pub after: ErrorStats,
+    /// SVG of the residual before and after, relative to the report directory.
+    pub figure: Option<String>,
+}
+
+/// The final model, briefly.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FinalModelSummary {
+    /// Modes.
+    pub modes: Vec<ModeSummary>,
+    /// Minimal real state dimension.
+    pub order: usize,
+    /// Delay of the known factor, seconds.
+    pub delay_s: f64,
+    /// Hold: `none`, `zoh:FS`, `sinc:FS`.
+    pub hold: String,
+    /// Integrators of the rigid body (0 when none).
+    pub rigid_body_integrators: usize,
+    /// Whether a feedthrough is present.
+    pub feedthrough: bool,
+    /// Dynamics factors (`input 3: pole -1234 rad/s`, ...).
+    pub dynamics: Vec<String>,
+    /// Iterations of the last refinement.
+    pub iterations: usize,
+    /// How the last refinement stopped.
+    pub convergence: String,
+}
+
+/// Wall-clock time of a stage.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageTime {
+    /// Stage.
+    pub stage: String,
+    /// Seconds.
+    pub seconds: f64,
+}
+
+/// The whole summary.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// `frfit-summary`.
+    pub schema: String,
+    /// 1.
+    pub version: u32,
+    /// `fit` or `diagnose`.
+    pub command: String,
+    /// The data.
+    pub data: DataSummary,
+    /// The first model.
+    pub initial: InitialSummary,
+    /// The diagnosis steps, in order.
+    pub steps: Vec<StepSummary>,
+    /// `noise_limited` or `unexplained_residual`.
+    pub verdict: String,
+    /// The evidence for the verdict.
+    pub verdict_evidence: String,
+    /// The final model.
+    pub final_model: FinalModelSummary,
+    /// Its error against the data.
+    #[serde(rename = "final")]
+    pub final_errors: ErrorStats,
+    /// The data's own noise level: median over lines and entries of `sqrt(var) / |G|`
+    /// (`None` without a variance).
+    pub data_noise_median_rel: Option<f64>,
+    /// Time per stage.
+    pub timings: Vec<StageTime>,
+}
