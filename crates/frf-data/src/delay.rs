@@ -1,5 +1,5 @@
 //! Delay estimation and compensation without a model: the *delay periodogram* of the
-//! squared FRF.
+//! squared FRF, with a robust refinement.
 //!
 //! A sampled measurement of a continuous plant sees the plant through a zero-order hold
 //! (a delay of half a sample, `e^{-j w Ts/2}` times a real, positive `sinc` droop) and a
@@ -25,12 +25,28 @@
 //! (the main lobe of `D` is `1 / (4 f_max)` wide), then a golden-section search refines
 //! the best grid point to [`DelayConfig::tolerance_s`].
 //!
-//! **Uncertainty.** `tau` solves `D'(tau) = 0` with `D' = -2 sum_k w_k Im(s_k e^{2 j w_k
+//! **Robust refinement.** Entries near their own resonances and anti-resonances have
+//! phases far from the delay line and pull the plain maximum. Within one grid step of it,
+//! the estimate is refined on `R(tau) = sum_k sum_e a_ke max(x_ke, 0)^p`, where
+//! `x_ke = Re(+-q_ke e^{2 j w_k tau})` is the cosine of entry `e`'s doubled phase error,
+//! `q_ke = G_ke^2 / |G_ke|^2` and `a_ke` its weight in `s_k`: a redescending M-estimate
+//! in which an entry off by more than about `1 / sqrt(p)` rad stops counting
+//! ([`DelayConfig::robust_power`], default 16; 0 keeps the plain maximum).
+//!
+//! **Bias.** The method assumes real modes and no damping phase. A damped mode adds a
+//! phase lag of about `2 zeta w / w_r` below its resonance (a delay of `2 zeta / w_r`
+//! weighted by its share of the response) and a lead of about `2 zeta w_r / w` above
+//! it, so lightly damped data give a bias of a few microseconds: on simulated plants
+//! with damping 0.002..0.03 and lines up to 2 kHz the errors are within 6 us (see the
+//! tests), on the reference wafer stage 2.7 us. The uncertainty below measures the
+//! scatter of the lines, not this bias.
+//!
+//! **Uncertainty.** For the plain periodogram, `tau` solves `D'(tau) = 0` with `D' = -2 sum_k w_k Im(s_k e^{2 j w_k
 //! tau})` (for the positive branch); treating the lines as independent, the sandwich
 //! (curvature) estimate is `std(tau) = sqrt(sum_k t_k^2) / |D''(tau)|` with
 //! `t_k = 2 w_k Im(s_k e^{2 j w_k tau})` and `D'' = -4 sum_k w_k^2 Re(s_k e^{2 j w_k
-//! tau})`. It measures how consistently the lines agree on the delay, resonances
-//! included, so it is conservative for lightly damped data.
+//! tau})`; the robust refinement uses the same sandwich on `R` (with `R''` by central
+//! differences). It measures how consistently the lines agree on the delay.
 
 use crate::{Frf, FrfDataset, FrfError, C64};
 use serde::{Deserialize, Serialize};
@@ -53,6 +69,10 @@ pub struct DelayConfig {
     /// With a variance, weight each entry by its signal-to-noise fraction
     /// `|G|^2 / (|G|^2 + var)` as well as by `|G|`. Default `true`.
     pub use_variance: bool,
+    /// Exponent `p` of the robust refinement (see the module documentation); 0 keeps the
+    /// plain periodogram maximum. Default 16 (entries whose doubled phase is off by more
+    /// than ~0.25 rad barely count).
+    pub robust_power: u32,
 }
 
 impl Default for DelayConfig {
@@ -63,6 +83,7 @@ impl Default for DelayConfig {
             grid_step_s: None,
             tolerance_s: 1e-8,
             use_variance: true,
+            robust_power: 16,
         }
     }
 }
@@ -82,8 +103,9 @@ pub enum DelayPhaseKind {
 pub struct DelayEstimate {
     /// The estimated delay, seconds (hold + computation + transport).
     pub tau_s: f64,
-    /// Curvature (sandwich) standard deviation of `tau_s`, seconds, when `D''` is
-    /// negative definite at the maximum.
+    /// Curvature (sandwich) standard deviation of `tau_s`, seconds, when the objective's
+    /// second derivative is negative at the maximum. It reflects the scatter of the lines
+    /// only, not the bias of the real-mode assumption (module documentation).
     pub std_s: Option<f64>,
     /// `|D(tau)| / n_lines`, in `[0, 1]`: 1 when every line's compensated FRF is exactly
     /// real (or imaginary). A low value (below ~0.3) means the data do not follow the
@@ -120,6 +142,8 @@ pub fn estimate_delay(
     // Per-line statistic s_k.
     let mut w = Vec::with_capacity(n);
     let mut s = Vec::with_capacity(n);
+    // Per entry: the unit phasor g^2 / |g|^2 and its weight (normalised per line).
+    let mut q: Vec<Vec<(C64, f64)>> = Vec::with_capacity(n);
     let mut line = vec![C64::new(0.0, 0.0); m];
     let mut var = vec![0.0; m];
     let use_var = cfg.use_variance && data.has_variance();
@@ -134,6 +158,7 @@ pub fn estimate_delay(
         }
         let mut acc = C64::new(0.0, 0.0);
         let mut wsum = 0.0;
+        let mut qk = Vec::with_capacity(m);
         for (e, g) in line.iter().enumerate() {
             let a = g.norm();
             if !(a.is_finite() && a > 0.0) {
@@ -144,12 +169,18 @@ pub fn estimate_delay(
                 wt *= a * a / (a * a + var[e]);
             }
             // g^2 / |g|^2 is the unit phasor e^{2 j phase}.
-            acc += g * g / (a * a) * wt;
+            let ph = g * g / (a * a);
+            acc += ph * wt;
             wsum += wt;
+            qk.push((ph, wt));
         }
         if wsum > 0.0 && acc.re.is_finite() && acc.im.is_finite() {
             w.push(TAU * f);
             s.push(acc / wsum);
+            for x in qk.iter_mut() {
+                x.1 /= wsum;
+            }
+            q.push(qk);
         }
     }
     if w.len() < MIN_DELAY_LINES {
@@ -255,16 +286,98 @@ pub fn estimate_delay(
     }
     let dv = d(tau);
     let sign = if dv >= 0.0 { 1.0 } else { -1.0 };
-    // Sandwich uncertainty on the branch sign * D.
-    let mut sum_t2 = 0.0;
-    let mut d2 = 0.0;
-    for (wk, sk) in w.iter().zip(&s) {
-        let rot = *sk * C64::from_polar(1.0, 2.0 * wk * tau) * sign;
-        let t = 2.0 * wk * rot.im;
-        sum_t2 += t * t;
-        d2 += -4.0 * wk * wk * rot.re;
+    let mut resolution = (b - a).max(0.0);
+    // Robust refinement: maximise R(tau) = sum_k sum_e a_ke psi(x_ke(tau)) with
+    // x = Re(sign q_ke e^{2 j w_k tau}) (the cosine of the entry's doubled phase error)
+    // and the redescending psi(x) = max(x, 0)^p: an entry whose phase is off by more than
+    // ~1/sqrt(p) rad (near its own resonance or anti-resonance) stops pulling the
+    // estimate, which removes most of the bias of the plain periodogram.
+    let p = cfg.robust_power;
+    let mut std_s = None;
+    if p > 0 {
+        let robust = |tau: f64, out: Option<&mut (f64, f64)>| -> f64 {
+            let mut acc = 0.0;
+            let mut sum_t2 = 0.0;
+            for (wk, qk) in w.iter().zip(&q) {
+                let rot = C64::from_polar(sign, 2.0 * wk * tau);
+                let mut t = 0.0;
+                for &(ph, wt) in qk {
+                    let z = ph * rot;
+                    if z.re > 0.0 {
+                        let pm1 = z.re.powi(p as i32 - 1);
+                        acc += wt * pm1 * z.re;
+                        // d/dtau of x^p = p x^(p-1) * (-2 w Im z)
+                        t += wt * p as f64 * pm1 * (-2.0 * wk * z.im);
+                    }
+                }
+                sum_t2 += t * t;
+            }
+            if let Some(o) = out {
+                *o = (sum_t2, acc);
+            }
+            acc
+        };
+        let (mut ra, mut rb) = ((tau - step).max(lo), (tau + step).min(hi));
+        // A fine scan first (the robust objective is narrower), then golden section.
+        let n_fine = 32;
+        let mut rbest = (tau, robust(tau, None));
+        for i in 0..=n_fine {
+            let t = ra + (rb - ra) * i as f64 / n_fine as f64;
+            let v = robust(t, None);
+            if v > rbest.1 {
+                rbest = (t, v);
+            }
+        }
+        let h = (rb - ra) / n_fine as f64;
+        ra = (rbest.0 - h).max(lo);
+        rb = (rbest.0 + h).min(hi);
+        let mut x1 = rb - gr * (rb - ra);
+        let mut x2 = ra + gr * (rb - ra);
+        let (mut f1, mut f2) = (robust(x1, None), robust(x2, None));
+        let mut iter = 0;
+        while rb - ra > cfg.tolerance_s && iter < 200 {
+            iter += 1;
+            if f1 >= f2 {
+                rb = x2;
+                x2 = x1;
+                f2 = f1;
+                x1 = rb - gr * (rb - ra);
+                f1 = robust(x1, None);
+            } else {
+                ra = x1;
+                x1 = x2;
+                f1 = f2;
+                x2 = ra + gr * (rb - ra);
+                f2 = robust(x2, None);
+            }
+        }
+        let mut t_r = 0.5 * (ra + rb);
+        if robust(t_r, None) < rbest.1 {
+            t_r = rbest.0;
+        }
+        tau = t_r;
+        resolution = (rb - ra).max(0.0);
+        // Sandwich uncertainty: sqrt(sum_k t_k^2) / |R''|, R'' by central differences.
+        let mut st = (0.0, 0.0);
+        let r0 = robust(tau, Some(&mut st));
+        let hh = (0.05 * step).max(1e-12);
+        let r2 = (robust(tau + hh, None) - 2.0 * r0 + robust(tau - hh, None)) / (hh * hh);
+        if r2 < 0.0 && st.0.is_finite() {
+            std_s = Some(st.0.sqrt() / r2.abs());
+        }
+    } else {
+        // Sandwich uncertainty on the branch sign * D.
+        let mut sum_t2 = 0.0;
+        let mut d2 = 0.0;
+        for (wk, sk) in w.iter().zip(&s) {
+            let rot = *sk * C64::from_polar(1.0, 2.0 * wk * tau) * sign;
+            let t = 2.0 * wk * rot.im;
+            sum_t2 += t * t;
+            d2 += -4.0 * wk * wk * rot.re;
+        }
+        std_s = (d2 < 0.0).then(|| sum_t2.sqrt() / d2.abs());
     }
-    let std_s = (d2 < 0.0).then(|| sum_t2.sqrt() / d2.abs());
+    let dv = d(tau);
     Ok(DelayEstimate {
         tau_s: tau,
         std_s,
@@ -276,7 +389,7 @@ pub fn estimate_delay(
         },
         range_s: (lo, hi),
         grid_step_s: step,
-        resolution_s: (b - a).max(0.0),
+        resolution_s: resolution,
         n_lines: w.len(),
     })
 }
