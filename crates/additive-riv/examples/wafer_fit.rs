@@ -37,9 +37,20 @@ fn main() {
     if args.iter().any(|a| a == "noadapt") {
         cfg.adapt = None;
     }
+    if args.iter().any(|a| a == "fixdelay") {
+        cfg.delay = DelayChoice::Fixed { seconds: 150e-6 };
+    }
     if let Some(n) = args.iter().find_map(|a| a.strip_prefix("modes=")) {
         cfg.modes = ModeSelection::Count(n.parse().unwrap());
     }
+    cfg.riv.progress = frf_data::ProgressSink::new(|p| {
+        eprintln!(
+            "    it {} cost {:.6e} {}",
+            p.step,
+            p.cost.unwrap_or(0.0),
+            p.message
+        )
+    });
     cfg.progress = frf_data::ProgressSink::new(|p| {
         eprintln!("  [{}] {} {:?} {}", p.stage, p.step, p.cost, p.message)
     });
@@ -102,4 +113,22 @@ fn main() {
     let (a, b) = rel_errs(&fit.model, &band);
     eprintln!("vs data: median {a:.3e} p95 {b:.3e}");
     eprintln!("order {}", fit.model.to_modal_model().unwrap().order(1e-6));
+    rank_ratios(&fit.model);
+}
+#[allow(dead_code)]
+fn rank_ratios(model: &AdditiveModel) {
+    let mm = model.to_modal_model().unwrap();
+    for p in &mm.pairs {
+        let sv = p.residue.singular_values().unwrap();
+        eprintln!(
+            "  {:8.2} Hz sv ratios {:?}",
+            p.f_hz(),
+            sv.iter().map(|s| s / sv[0]).take(3).collect::<Vec<_>>()
+        );
+    }
+    let sv: Vec<f64> = mm.rigid.last().unwrap().singular_values().unwrap();
+    eprintln!(
+        "  rigid sv ratios {:?}",
+        sv.iter().map(|s| s / sv[0]).collect::<Vec<_>>()
+    );
 }

@@ -17,6 +17,7 @@
 //! - [`structure`]: adding modes at peaks of the residual's CMIF and dropping
 //!   insignificant ones, so that a plain fit holds every mode the data show.
 
+pub mod augment;
 pub mod error;
 pub mod fitter;
 pub mod init;

@@ -218,26 +218,26 @@ pub fn iterate(
         let (s_new, e_new, trial, b_new, c_new) = match accepted {
             Some(a) => a,
             None => {
-                // No halving lowered the cost: take the full step of Algorithm 1.
+                // No halving lowered the cost: the iterate is stationary along the
+                // refined-IV direction (converged up to the noise) or the direction is
+                // not a descent direction here. Stop rather than take a step that raises
+                // the cost; say which.
                 non_descent += 1;
-                alpha = 1.0;
-                let s_new: Vec<f64> = shared
-                    .iter()
-                    .zip(&upd.d_shared)
-                    .map(|(a, d)| a + d)
-                    .collect();
-                let e_new: Vec<f64> = eta.iter().zip(&upd.d_eta).map(|(a, d)| a + d).collect();
-                let mut trial = model.clone();
-                unpack(&mut trial, &lay, &s_new, &e_new);
-                let b_new = Basis::new(&trial, &lay, &data.omega);
-                let c_new = cost(data, &lay, &b_new, &e_new, None, &ng);
-                if !c_new.is_finite() {
-                    convergence = Convergence::Failed {
-                        reason: format!("the cost became non-finite at iteration {it}"),
-                    };
-                    break;
-                }
-                (s_new, e_new, trial, b_new, c_new)
+                let rel_full = rel_norm(&upd.d_shared, &shared).max(rel_norm(&upd.d_eta, &eta));
+                convergence = if rel_full < 1e-6 {
+                    Convergence::CostTolerance {
+                        relative_change: 0.0,
+                    }
+                } else {
+                    Convergence::Failed {
+                        reason: format!(
+                            "iteration {it}: no step along the refined-IV direction (relative size \
+                             {rel_full:.1e}) lowers the cost; the start may be too far from the \
+                             optimum (try --method sk or fewer modes)"
+                        ),
+                    }
+                };
+                break;
             }
         };
         let d_s: Vec<f64> = upd.d_shared.iter().map(|d| alpha * d).collect();
@@ -287,10 +287,10 @@ pub fn iterate(
         }
     }
     if non_descent > 0 {
-        messages.push(format!(
-            "{non_descent} step(s) of Algorithm 1 did not lower the cost even when halved; \
-             they were taken in full as the algorithm prescribes"
-        ));
+        messages.push(
+            "the iterations stopped where no halving of the refined-IV step lowered the cost"
+                .to_string(),
+        );
     }
     if worst_cond > 1e12 {
         messages.push(format!(

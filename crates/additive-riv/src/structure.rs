@@ -37,6 +37,12 @@ pub struct AdaptConfig {
     pub coarse_tol: f64,
     /// Iteration limit of the refinements between structure changes. Default: 15.
     pub coarse_max_iterations: usize,
+    /// An added mode is kept only when the weighted residual energy within
+    /// `local_window` (relative) of the residual peak that called for it falls below this
+    /// fraction of what it was before the mode was added. Default: 0.25.
+    pub max_local_ratio: f64,
+    /// Half-width of that window, relative to the peak frequency. Default: 0.01.
+    pub local_window: f64,
     /// Practical-significance floor: a mode is added or kept only when its F statistic
     /// (the cost its parameters explain, in units of what they would absorb of pure
     /// noise) is at least this, on top of the F test at `alpha`. Measured FRF noise is
@@ -58,6 +64,8 @@ impl Default for AdaptConfig {
             min_separation: 0.025,
             zeta0: 0.01,
             min_f: 25.0,
+            max_local_ratio: 0.25,
+            local_window: 0.01,
             coarse_tol: 1e-6,
             coarse_max_iterations: 15,
             band_margin: 1.25,
@@ -212,6 +220,22 @@ pub fn residual_peaks(
 
 /// How far above its local median a residual peak must rise to be a mode candidate.
 pub const PEAK_OVER_LOCAL: f64 = 10.0;
+
+/// The weighted cost `sum w |E|^2` of `model` on `data`.
+fn model_cost(model: &AdditiveModel, data: &FitData) -> f64 {
+    let lay = Layout::of(model);
+    let basis = Basis::new(model, &lay, &data.omega);
+    let (_, eta) = pack(model, &lay);
+    cost(data, &lay, &basis, &eta, None, &groups(model, &lay))
+}
+
+/// The raw weighted residual energy `sum_k T_k` of the lines within `half_hz` of `f_hz`.
+fn local_energy(stats: &ResidualStats, data: &FitData, f_hz: f64, half_hz: f64) -> f64 {
+    let (lo, hi) = (TAU * (f_hz - half_hz), TAU * (f_hz + half_hz));
+    let a = data.omega.partition_point(|&w| w < lo);
+    let b = data.omega.partition_point(|&w| w <= hi);
+    stats.t[a..b].iter().sum::<f64>() * stats.s2 / 2.0
+}
 
 /// Line spacing of the data near `f_hz` (Hz).
 fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
@@ -377,24 +401,28 @@ pub fn adapt_modes(
     let mut history = fit.cost_history.clone();
     for round in 0..cfg.max_rounds {
         report.rounds = round + 1;
+        let previous = fit.clone();
+        let previous_cost = model_cost(&previous.model, data);
         let mut model = fit.model.clone();
         // 1. remove what does not belong
         let (dropped, _) = drop_pass(&mut model, data, cfg, &[])?;
         let mut changed = !dropped.is_empty();
         report
             .dropped
-            .extend(dropped.into_iter().map(|(_, f, why)| (f, why)));
+            .extend(dropped.iter().map(|(_, f, why)| (*f, why.clone())));
         // 2. add modes at residual peaks
         let n_old = model.submodels.len();
         let (lo, hi) = data.band_hz;
         let first_order = model_first_order(&model);
         let stats = ResidualStats::new(&model, data);
+        let mut peak_at = Vec::new();
         for &(f, _) in residual_peaks(&stats, data, cfg.alpha, cfg.min_separation)
             .iter()
             .filter(|(f, _)| *f > lo && *f < hi)
             .take(cfg.max_new_per_round)
         {
             model.push_mode(f, cfg.zeta0, first_order)?;
+            peak_at.push(f);
         }
         let added: Vec<usize> = (n_old..model.submodels.len()).collect();
         if added.is_empty() && !changed {
@@ -406,15 +434,66 @@ pub fn adapt_modes(
         report.refinements.push(refit.iterations);
         total_iterations += refit.iterations;
         history.extend_from_slice(&refit.cost_history);
-        // 3. keep only the added modes that are significant
+        // 3. keep only the added modes that are significant and that remove most of
+        //    the residual around them (a missed mode leaves only noise behind; a mode
+        //    fitted to a broadband misfit only reshapes it)
         if !added.is_empty() {
             let mut model = refit.model.clone();
+            let after = ResidualStats::new(&model, data);
+            let mut local_reject: Vec<(usize, f64, String)> = Vec::new();
+            for (t, &i) in added.iter().enumerate() {
+                let f = mode_f_hz(&model, i);
+                // the residual around the peak that called for the mode must drop
+                let fp = peak_at[t];
+                let half = cfg.local_window * fp;
+                let ratio = local_energy(&after, data, fp, half)
+                    / local_energy(&stats, data, fp, half).max(f64::MIN_POSITIVE);
+                if ratio > cfg.max_local_ratio {
+                    local_reject.push((
+                        i,
+                        f,
+                        format!(
+                            "leaves {:.0}% of the local residual (a missed mode removes more than {:.0}%)",
+                            100.0 * ratio,
+                            100.0 * (1.0 - cfg.max_local_ratio)
+                        ),
+                    ));
+                }
+            }
+            local_reject.sort_by(|a, b| b.0.cmp(&a.0));
+            for (i, _, _) in &local_reject {
+                model.remove_submodel(*i);
+            }
+            let kept_added: Vec<usize> = added
+                .iter()
+                .copied()
+                .filter(|i| !local_reject.iter().any(|r| r.0 == *i))
+                .collect();
+            // indices of the kept added modes after the removals
+            let remap = |i: usize| i - local_reject.iter().filter(|r| r.0 < i).count();
+            if !local_reject.is_empty() {
+                fit_numerators(&mut model, data)?;
+                report
+                    .dropped
+                    .extend(local_reject.iter().map(|(_, f, why)| (*f, why.clone())));
+            }
             let protect: Vec<usize> = (0..n_old).collect();
             let (dropped_new, stats) = drop_pass(&mut model, data, cfg, &protect)?;
-            for &i in &added {
-                if !dropped_new.iter().any(|d| d.0 == i) {
-                    report.added.push(stats[i]);
+            for &i in &kept_added {
+                let j = remap(i);
+                if !dropped_new.iter().any(|d| d.0 == j) {
+                    report.added.push(stats[j]);
                 }
+            }
+            if !local_reject.is_empty() && dropped_new.is_empty() {
+                refit.model = model.clone();
+            }
+            // nothing new survived and nothing was removed: the structure is final
+            let survived = kept_added
+                .iter()
+                .any(|&i| !dropped_new.iter().any(|d| d.0 == remap(i)));
+            if !survived && dropped.is_empty() {
+                changed = false;
             }
             if !dropped_new.is_empty() {
                 // the numerators were refitted without them; the next round (or the
@@ -426,6 +505,15 @@ pub fn adapt_modes(
             }
         }
         fit = refit;
+        // a round that ends worse than it started (the refit went astray) is undone
+        if model_cost(&fit.model, data) > previous_cost * (1.0 + 1e-9) {
+            report.dropped.push((
+                f64::NAN,
+                format!("round {} undone: it raised the cost", round + 1),
+            ));
+            fit = previous;
+            break;
+        }
         if !changed {
             break;
         }
