@@ -230,7 +230,7 @@ fn model_cost(model: &AdditiveModel, data: &FitData) -> f64 {
 }
 
 /// The raw weighted residual energy `sum_k T_k` of the lines within `half_hz` of `f_hz`.
-fn local_energy(stats: &ResidualStats, data: &FitData, f_hz: f64, half_hz: f64) -> f64 {
+pub fn local_energy(stats: &ResidualStats, data: &FitData, f_hz: f64, half_hz: f64) -> f64 {
     let (lo, hi) = (TAU * (f_hz - half_hz), TAU * (f_hz + half_hz));
     let a = data.omega.partition_point(|&w| w < lo);
     let b = data.omega.partition_point(|&w| w <= hi);
@@ -375,6 +375,18 @@ fn drop_pass(
         fit_numerators(model, data)?;
     }
     Ok((out, stats))
+}
+
+/// Removes unstable, overdamped, out-of-band, unresolved, duplicated and insignificant
+/// modes of `model` (see the checks of [`adapt_modes`]) and refits the numerators;
+/// returns what was removed (frequency in Hz, NaN when the poles were real, and why).
+pub fn prune_modes(
+    model: &mut AdditiveModel,
+    data: &FitData,
+    cfg: &AdaptConfig,
+) -> Result<Vec<(f64, String)>, RivError> {
+    let (removed, _) = drop_pass(model, data, cfg, &[])?;
+    Ok(removed.into_iter().map(|(_, f, why)| (f, why)).collect())
 }
 
 /// Refines `start` with RIV, then adds modes at significant residual peaks and removes

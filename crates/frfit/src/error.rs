@@ -30,6 +30,14 @@ pub enum FrfitError {
         /// What is wrong and what is expected.
         why: String,
     },
+    /// A fit, refinement or analysis failed.
+    #[error("{what}: {why}")]
+    Fit {
+        /// The stage.
+        what: String,
+        /// What went wrong and what to try.
+        why: String,
+    },
     /// A plot could not be drawn.
     #[error("plot {path}: {message}")]
     Plot {

@@ -6,8 +6,13 @@ use frfit::FrfitError;
 
 pub mod cmif;
 pub mod common;
+pub mod diagnose;
+pub mod eval;
+pub mod fit;
 pub mod info;
+pub mod model_opts;
 pub mod nonparametric;
+pub mod output;
 pub mod simulate;
 
 #[derive(Parser, Debug)]
@@ -35,6 +40,12 @@ pub enum Command {
     Simulate(simulate::Args),
     /// Nonparametric FRF from periodic measurements (.mat time records or spectra CSV).
     Nonparametric(nonparametric::Args),
+    /// Fit the additive model (rigid body + modes) by refined IV; write MODEL.json.
+    Fit(fit::Args),
+    /// Evaluate a fitted model at a data file's frequencies; write the response as CSV.
+    Eval(eval::Args),
+    /// Fit, then trace the residual to effects the model lacks; write a report.
+    Diagnose(diagnose::Args),
 }
 
 /// Runs the parsed command line.
@@ -45,5 +56,8 @@ pub fn run(cli: Cli) -> Result<(), FrfitError> {
         Command::Cmif(a) => cmif::run(a, quiet),
         Command::Simulate(a) => simulate::run(a, quiet),
         Command::Nonparametric(a) => nonparametric::run(a, quiet),
+        Command::Fit(a) => fit::run(a, quiet),
+        Command::Eval(a) => eval::run(a, quiet),
+        Command::Diagnose(a) => diagnose::run(a, quiet),
     }
 }

@@ -1,0 +1,117 @@
+//! `frfit diagnose DATA --report DIR`: fit, then trace the residual to effects the model
+//! lacks (missed mode, delay, hold, feedthrough, stiffness, input or output dynamics),
+//! add each one that explains more than noise, and report the error before and after.
+
+use super::common::load_data;
+use super::model_opts::{check_weighting, progress, FitOptions};
+use super::output::{print_fit, write_outputs};
+use clap::Args as ClapArgs;
+use frf_data::FrfDataset;
+use frfit::additive_riv::ModelFile;
+use frfit::pipeline;
+use frfit::FrfitError;
+use std::path::PathBuf;
+
+/// Arguments of `frfit diagnose`.
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// FRF file (CSV as in FORMATS.md, or UFF 58 with extension .uff/.unv).
+    pub data: PathBuf,
+    /// Fitting options.
+    #[command(flatten)]
+    pub opts: FitOptions,
+    /// Start from this model (a `frfit fit` MODEL.json) instead of the CMIF initialisation.
+    #[arg(long, value_name = "MODEL.json")]
+    pub model: Option<PathBuf>,
+    /// Sample rate of the measurement, Hz, for testing a zero-order hold (default: from
+    /// the file's metadata or comments, e.g. "sampling 10 kHz").
+    #[arg(long, value_name = "HZ")]
+    pub fs: Option<f64>,
+    /// Write report.md, the SVG figures, model.json and summary.json into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub report: PathBuf,
+}
+
+/// Runs `frfit diagnose`.
+pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
+    let data = load_data(&args.data)?;
+    check_weighting(&args.opts, data.has_variance())?;
+    let mut cfg = args.opts.pipeline_config();
+    cfg.diagnose = true;
+    if let Some(fs) = args.fs {
+        if !(fs.is_finite() && fs > 0.0) {
+            return Err(FrfitError::argument(
+                "--fs",
+                fs,
+                "must be a sample rate > 0 Hz",
+            ));
+        }
+        cfg.fs_hz = Some(fs);
+    }
+    if let Some(p) = &args.model {
+        let f = ModelFile::read(p)
+            .map_err(|e| FrfitError::argument("--model", p.display(), e.to_string()))?;
+        let m = f
+            .to_model()
+            .map_err(|e| FrfitError::argument("--model", p.display(), e.to_string()))?;
+        if m_dims(&m) != (data.ny(), data.nu()) {
+            return Err(FrfitError::argument(
+                "--model",
+                p.display(),
+                format!(
+                    "the model is {}x{} but the data are {}x{}",
+                    m_dims(&m).0,
+                    m_dims(&m).1,
+                    data.ny(),
+                    data.nu()
+                ),
+            ));
+        }
+        cfg.start_model = Some(m);
+    }
+    let (sink, bar) = progress(quiet);
+    cfg.progress = sink;
+    let out = pipeline::run(&data, &args.data.display().to_string(), &cfg, "diagnose");
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let out = out?;
+    let model_path = args.report.join("model.json");
+    std::fs::create_dir_all(&args.report).map_err(|e| FrfitError::io(&args.report, e))?;
+    write_outputs(
+        &out,
+        &model_path,
+        Some(&args.report),
+        &args.data,
+        "frfit diagnose",
+    )?;
+    if !quiet {
+        print_fit(&out);
+        for s in &out.summary.steps {
+            println!(
+                "  step {:<16} {:<8} F = {:>10.3e} (crit {:.3}) median rel {:.3e} -> {:.3e}  {}",
+                s.effect,
+                if s.accepted { "ACCEPTED" } else { "rejected" },
+                s.f_statistic,
+                s.f_critical,
+                s.before.median_rel,
+                s.after.median_rel,
+                s.params
+            );
+        }
+        println!(
+            "verdict: {} ({})",
+            out.summary.verdict, out.summary.verdict_evidence
+        );
+        println!(
+            "report written to {}",
+            args.report.join("report.md").display()
+        );
+    }
+    Ok(())
+}
+
+fn m_dims(m: &frfit::additive_riv::AdditiveModel) -> (usize, usize) {
+    use frf_data::ModelStructure;
+    (m.ny(), m.nu())
+}

@@ -1,0 +1,204 @@
+//! Options shared by `fit` and `diagnose`: hold, delay, modes, method, weighting, FRF
+//! type, and the progress bar.
+
+use super::common::Band;
+use additive_riv::{DelayChoice, Hold, IvMethod, ModeSelection};
+use clap::{Args as ClapArgs, ValueEnum};
+use frf_data::{ProgressSink, Weighting};
+use frfit::pipeline::{FrfType, PipelineConfig};
+use frfit::FrfitError;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::time::Duration;
+
+/// `--hold zoh:FS | sinc:FS | none`.
+pub fn parse_hold(s: &str) -> Result<Option<Hold>, String> {
+    let s = s.trim();
+    if s.eq_ignore_ascii_case("none") {
+        return Ok(None);
+    }
+    let (kind, fs) = s
+        .split_once(':')
+        .ok_or_else(|| format!("expected zoh:FS_HZ, sinc:FS_HZ or none, got `{s}`"))?;
+    let fs: f64 = fs
+        .trim()
+        .parse()
+        .map_err(|_| format!("sample rate `{fs}` in `{s}` is not a number (Hz)"))?;
+    if !(fs.is_finite() && fs > 0.0) {
+        return Err(format!("sample rate {fs} in `{s}` must be > 0 Hz"));
+    }
+    match kind.trim().to_ascii_lowercase().as_str() {
+        "zoh" => Ok(Some(Hold::Zoh { fs_hz: fs })),
+        "sinc" => Ok(Some(Hold::Sinc { fs_hz: fs })),
+        k => Err(format!(
+            "unknown hold `{k}`: use zoh:FS_HZ (exact) or sinc:FS_HZ"
+        )),
+    }
+}
+
+/// `--delay auto | none | SECONDS` (also `150us`, `0.2ms`).
+pub fn parse_delay(s: &str) -> Result<DelayChoice, String> {
+    let t = s.trim().to_ascii_lowercase();
+    match t.as_str() {
+        "auto" => return Ok(DelayChoice::Auto),
+        "none" | "0" => return Ok(DelayChoice::None),
+        _ => {}
+    }
+    let (num, scale) = if let Some(v) = t.strip_suffix("us") {
+        (v, 1e-6)
+    } else if let Some(v) = t.strip_suffix("ms") {
+        (v, 1e-3)
+    } else if let Some(v) = t.strip_suffix('s') {
+        (v, 1.0)
+    } else {
+        (t.as_str(), 1.0)
+    };
+    let v: f64 = num.trim().parse().map_err(|_| {
+        format!("expected auto, none or a delay in seconds (e.g. 1.5e-4 or 150us), got `{s}`")
+    })?;
+    if !v.is_finite() || v < 0.0 {
+        return Err(format!("delay `{s}` must be finite and >= 0"));
+    }
+    Ok(DelayChoice::Fixed { seconds: v * scale })
+}
+
+/// `--modes auto | N`.
+pub fn parse_modes(s: &str) -> Result<ModeSelection, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(ModeSelection::Auto);
+    }
+    let n: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected auto or a number of modes, got `{s}`"))?;
+    if n == 0 {
+        return Err("--modes must be at least 1 (or auto)".into());
+    }
+    Ok(ModeSelection::Count(n))
+}
+
+/// `--method`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Method {
+    /// Refined instrumental variables (Algorithm 1 of the wafer-stage paper).
+    Riv,
+    /// Sanathanan-Koerner iterations (Remark 1).
+    Sk,
+}
+
+/// `--weighting`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WeightingArg {
+    /// Inverse variance when the data carry `_var` (maximum likelihood), else inverse magnitude.
+    Auto,
+    /// 1 / var (needs `_var` columns).
+    Variance,
+    /// 1 / |G|^2 (eq. 27 of the wafer-stage paper, relative error).
+    Magnitude,
+    /// Uniform.
+    Uniform,
+}
+
+/// `--frf-type`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FrfTypeArg {
+    /// Displacement (or angle) per force.
+    Displacement,
+    /// Velocity per force: the model is s times a displacement model.
+    Velocity,
+    /// Acceleration per force: the model is s^2 times a displacement model.
+    Accelerance,
+}
+
+/// The fitting options of `fit` and `diagnose`.
+#[derive(ClapArgs, Debug, Clone)]
+pub struct FitOptions {
+    /// Frequency band LO:HI in Hz (either side may be empty).
+    #[arg(long, value_parser = super::common::parse_band, value_name = "LO:HI")]
+    pub band: Option<Band>,
+    /// Delay: `auto` (estimate and refine), `none`, or seconds (`1.5e-4`, `150us`).
+    /// Default: `auto` for fit; for diagnose the delay the file declares (the loop
+    /// tests for more).
+    #[arg(long, value_parser = parse_delay, value_name = "auto|none|SECONDS")]
+    pub delay: Option<DelayChoice>,
+    /// Sampled-measurement hold: `zoh:FS_HZ` (exact zero-order hold), `sinc:FS_HZ`, `none`.
+    #[arg(long, value_parser = parse_hold, value_name = "zoh:FS_HZ|none")]
+    pub hold: Option<Option<Hold>>,
+    /// Modes to start from: `auto` (every CMIF peak) or N (the N most prominent).
+    #[arg(long, value_parser = parse_modes, value_name = "auto|N")]
+    pub modes: Option<ModeSelection>,
+    /// Iterations: refined IV (riv) or SK.
+    #[arg(long, value_enum, default_value_t = Method::Riv)]
+    pub method: Method,
+    /// Weighting of the criterion.
+    #[arg(long, value_enum, default_value_t = WeightingArg::Auto)]
+    pub weighting: WeightingArg,
+    /// What the FRF measures.
+    #[arg(long, value_enum, default_value_t = FrfTypeArg::Displacement)]
+    pub frf_type: FrfTypeArg,
+}
+
+impl FitOptions {
+    /// The pipeline configuration these options describe.
+    pub fn pipeline_config(&self) -> PipelineConfig {
+        PipelineConfig {
+            band_hz: self
+                .band
+                .map(|b| (b.lo_hz.unwrap_or(0.0), b.hi_hz.unwrap_or(f64::MAX))),
+            modes: self.modes.clone().unwrap_or_default(),
+            hold: self.hold.flatten(),
+            delay: self.delay,
+            method: match self.method {
+                Method::Riv => IvMethod::Riv,
+                Method::Sk => IvMethod::Sk,
+            },
+            weighting: match self.weighting {
+                WeightingArg::Auto => Weighting::Auto,
+                WeightingArg::Variance => Weighting::InverseVariance,
+                WeightingArg::Magnitude => Weighting::InverseMagnitude,
+                WeightingArg::Uniform => Weighting::Uniform,
+            },
+            frf_type: match self.frf_type {
+                FrfTypeArg::Displacement => FrfType::Displacement,
+                FrfTypeArg::Velocity => FrfType::Velocity,
+                FrfTypeArg::Accelerance => FrfType::Accelerance,
+            },
+            ..Default::default()
+        }
+    }
+}
+
+/// A spinner with the stage and cost, on stderr; silent with `--quiet` or when stderr is
+/// not a terminal.
+pub fn progress(quiet: bool) -> (ProgressSink, Option<ProgressBar>) {
+    if quiet {
+        return (ProgressSink::none(), None);
+    }
+    let bar = ProgressBar::new_spinner();
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    bar.enable_steady_tick(Duration::from_millis(120));
+    let b = bar.clone();
+    let sink = ProgressSink::new(move |p| {
+        let cost = p.cost.map(|c| format!(" cost {c:.4e}")).unwrap_or_default();
+        let total = p.total.map(|t| format!("/{t}")).unwrap_or_default();
+        b.set_message(format!(
+            "{} {}{}{}: {}",
+            p.stage, p.step, total, cost, p.message
+        ));
+    });
+    (sink, Some(bar))
+}
+
+/// Checks that a weighting the user asked for can be applied.
+pub fn check_weighting(opts: &FitOptions, has_var: bool) -> Result<(), FrfitError> {
+    if opts.weighting == WeightingArg::Variance && !has_var {
+        return Err(FrfitError::argument(
+            "--weighting",
+            "variance",
+            "the data carry no `_var` columns; use auto, magnitude or uniform",
+        ));
+    }
+    Ok(())
+}

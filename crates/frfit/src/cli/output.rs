@@ -1,0 +1,99 @@
+//! Writing what a fit produced (model JSON, report) and printing its summary.
+
+use frfit::additive_riv::{ModelFile, Provenance};
+use frfit::pipeline::PipelineOutput;
+use frfit::report::{write_report, ReportInput};
+use frfit::FrfitError;
+use std::path::Path;
+
+/// Writes the model to `model_path` and, with `report`, the report into that directory.
+pub fn write_outputs(
+    out: &PipelineOutput,
+    model_path: &Path,
+    report: Option<&Path>,
+    data_path: &Path,
+    command: &str,
+) -> Result<(), FrfitError> {
+    let prov = Provenance {
+        estimator: out.fit.estimator.clone(),
+        data: Some(data_path.display().to_string()),
+        weighting: out.fitter_report.weighting.clone(),
+        iterations: out.fit.iterations,
+        convergence: out.fit.convergence.describe(),
+        cost: out.fit.final_cost(),
+        frfit_version: format!("{} ({command})", env!("CARGO_PKG_VERSION")),
+        notes: out.fit.messages.clone(),
+    };
+    let file = ModelFile::from_model(
+        &out.fit.model,
+        out.band.units.clone(),
+        Some((out.summary.data.band_hz[0], out.summary.data.band_hz[1])),
+        prov,
+    )
+    .map_err(|e| FrfitError::Fit {
+        what: "model file".into(),
+        why: e.to_string(),
+    })?;
+    if let Some(parent) = model_path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| FrfitError::io(parent, e))?;
+    }
+    file.write(model_path).map_err(|e| FrfitError::Io {
+        path: model_path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    if let Some(dir) = report {
+        let title = format!("frfit {} of {}", out.summary.command, data_path.display());
+        let input = ReportInput {
+            data: &out.band,
+            noise_var: Some(&out.noise.variance),
+            cmif: &out.cmif,
+            peaks: &out.peaks,
+            initial: &out.initial_response,
+            final_model: &out.final_response,
+            steps: &out.step_responses,
+            title: &title,
+        };
+        write_report(dir, &input, &out.summary)?;
+    }
+    Ok(())
+}
+
+/// Prints the modes and the error of a fit.
+pub fn print_fit(out: &PipelineOutput) {
+    let s = &out.summary;
+    println!(
+        "{}: {}x{}, {} lines, band {:.4}..{:.4} Hz, noise {}",
+        s.data.path,
+        s.data.ny,
+        s.data.nu,
+        s.data.lines,
+        s.data.band_hz[0],
+        s.data.band_hz[1],
+        s.data.noise_source
+    );
+    for m in &out.fit.messages {
+        println!("  {m}");
+    }
+    println!(
+        "{} modes, order {}, delay {:.3} us, hold {}; {} iterations, {}",
+        s.final_model.modes.len(),
+        s.final_model.order,
+        s.final_model.delay_s * 1e6,
+        s.final_model.hold,
+        out.fit.iterations,
+        out.fit.convergence.describe()
+    );
+    println!("     f [Hz]      zeta");
+    for m in &s.final_model.modes {
+        println!("  {:>10.4}  {:>8.5}", m.f_hz, m.zeta);
+    }
+    println!(
+        "error vs data: median {:.3e}, p95 {:.3e}, residual/noise {:.3}{}",
+        s.final_errors.median_rel,
+        s.final_errors.p95_rel,
+        s.final_errors.residual_to_noise,
+        s.data_noise_median_rel
+            .map(|n| format!(" (data noise median {n:.3e})"))
+            .unwrap_or_default()
+    );
+}
