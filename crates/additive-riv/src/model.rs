@@ -76,6 +76,53 @@ pub struct Submodel {
     /// exact-hold rigid body uses it so that its single numerator matrix is the
     /// continuous-time residue (`zoh(B/s^2) = B ts^2/2 (q + q^2) / (1 - q)^2`).
     pub num_poly: Vec<f64>,
+    /// An exact-hold mode with the numerator of a constant continuous numerator: the
+    /// submodel is the zero-order-hold image of `B / (s^2 + 2 zeta w s + w^2)`,
+    /// `B (beta_1 q + beta_2 q^2) / (1 + a_1 q + a_2 q^2)`, whose `beta`s follow from the
+    /// poles ([`zoh_mode_shape`]); `num_poly` then holds `[0, beta_1, beta_2]`, kept in
+    /// step with `den` by [`AdditiveModel::sync_shapes`]. One numerator matrix per mode,
+    /// as in continuous time (eq. 26), instead of two free ones that could absorb a delay.
+    pub zoh_shape: bool,
+}
+
+/// `(beta_1, beta_2)` of the zero-order-hold image of `1 / ((s - p_1)(s - p_2))` whose
+/// discrete poles are the roots `z` of `z^2 + a_1 z + a_2` (`den = [a_1, a_2]`), sample
+/// time `ts`: with `p = ln(z) / ts` and `c = (z - 1) / p` (the ZOH gain of `1/(s-p)`),
+/// `beta_1 = (c_1 - c_2) / (p_1 - p_2)` and `beta_2 = (c_2 z_1 - c_1 z_2) / (p_1 - p_2)`.
+/// `None` for a repeated or non-representable (negative real) discrete pole.
+pub fn zoh_mode_shape(den: &[f64], ts: f64) -> Option<[f64; 2]> {
+    if den.len() != 2 {
+        return None;
+    }
+    let (a1, a2) = (den[0], den[1]);
+    let disc = C64::new(a1 * a1 - 4.0 * a2, 0.0).sqrt();
+    let z1 = (-a1 + disc) / 2.0;
+    let z2 = (-a1 - disc) / 2.0;
+    if (z1 - z2).norm() <= 1e-12 * z1.norm().max(1e-300) {
+        return None;
+    }
+    if [z1, z2]
+        .iter()
+        .any(|z| z.im.abs() <= 1e-15 * z.norm() && z.re <= 0.0)
+    {
+        return None;
+    }
+    let gain = |z: C64| -> (C64, C64) {
+        let p = z.ln() / ts;
+        let x = p * ts;
+        let c = if x.norm() < 1e-6 {
+            ts * (C64::new(1.0, 0.0) + x / 2.0)
+        } else {
+            (z - 1.0) / p
+        };
+        (p, c)
+    };
+    let (p1, c1) = gain(z1);
+    let (p2, c2) = gain(z2);
+    let b1 = (c1 - c2) / (p1 - p2);
+    let b2 = (c2 * z1 - c1 * z2) / (p1 - p2);
+    let out = [b1.re, b2.re];
+    out.iter().all(|v| v.is_finite()).then_some(out)
 }
 
 impl Submodel {
@@ -127,7 +174,18 @@ impl Submodel {
             num_start,
             num,
             num_poly: vec![1.0],
+            zoh_shape: false,
             ..self.clone()
+        }
+    }
+
+    /// Recomputes the fixed factor of an exact-hold mode from its poles (no-op for other
+    /// submodels or when the poles have no exact-hold form).
+    pub fn sync_shape(&mut self, ts: f64) {
+        if self.zoh_shape {
+            if let Some([b1, b2]) = zoh_mode_shape(&self.den, ts) {
+                self.num_poly = vec![0.0, b1, b2];
+            }
         }
     }
 
@@ -392,6 +450,7 @@ impl AdditiveModel {
             num: vec![Mat::zeros(self.ny, self.nu)],
             scale,
             num_poly,
+            zoh_shape: false,
         });
         Ok(self.submodels.len() - 1)
     }
@@ -423,6 +482,7 @@ impl AdditiveModel {
                 num: vec![Mat::zeros(self.ny, self.nu); if first_order_numerator { 2 } else { 1 }],
                 scale: wn,
                 num_poly: vec![1.0],
+                zoh_shape: false,
             },
             Domain::ZohDiscrete { ts } => {
                 if wn * ts >= PI {
@@ -434,15 +494,18 @@ impl AdditiveModel {
                 }
                 let p = C64::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt());
                 let zp = (p * ts).exp();
-                Submodel {
+                let mut sub = Submodel {
                     kind: SubmodelKind::Mode,
                     integrators: 0,
                     den: vec![-2.0 * zp.re, zp.norm_sqr()],
-                    num_start: 1,
-                    num: vec![Mat::zeros(self.ny, self.nu); 2],
+                    num_start: 0,
+                    num: vec![Mat::zeros(self.ny, self.nu)],
                     scale: 1.0,
                     num_poly: vec![1.0],
-                }
+                    zoh_shape: true,
+                };
+                sub.sync_shape(ts);
+                sub
             }
         };
         self.submodels.push(sub);
@@ -468,8 +531,19 @@ impl AdditiveModel {
             num: vec![Mat::zeros(self.ny, self.nu)],
             scale: 1.0,
             num_poly: vec![1.0],
+            zoh_shape: false,
         });
         Ok(self.submodels.len() - 1)
+    }
+
+    /// Recomputes the numerator shapes of the exact-hold modes from their poles (after
+    /// the denominators changed).
+    pub fn sync_shapes(&mut self) {
+        if let Domain::ZohDiscrete { ts } = self.domain {
+            for s in &mut self.submodels {
+                s.sync_shape(ts);
+            }
+        }
     }
 
     /// Adds a general submodel (advanced use; validated like the others).
@@ -499,6 +573,26 @@ impl AdditiveModel {
         }
         if matches!(self.domain, Domain::Continuous) {
             check_scale(sub.scale)?;
+        }
+        if sub.zoh_shape {
+            let Domain::ZohDiscrete { ts } = self.domain else {
+                return Err(RivError::Structure(
+                    "an exact-hold mode needs the zoh domain".into(),
+                ));
+            };
+            if sub.den.len() != 2
+                || sub.num.len() != 1
+                || sub.num_start != 0
+                || sub.integrators != 0
+            {
+                return Err(RivError::Structure(
+                    "an exact-hold mode has two denominator coefficients and one numerator".into(),
+                ));
+            }
+            let mut sub = sub;
+            sub.sync_shape(ts);
+            self.submodels.push(sub);
+            return Ok(self.submodels.len() - 1);
         }
         self.submodels.push(sub);
         Ok(self.submodels.len() - 1)
@@ -1159,6 +1253,7 @@ impl ModelStructure for AdditiveModel {
             self.set_submodel_params(i, &params[off..off + np]);
             off += np;
         }
+        self.sync_shapes();
         if self.factor.fit_delay {
             self.factor.delay_s = params[off];
             off += 1;

@@ -74,6 +74,10 @@ pub struct SubmodelJson {
     /// Fixed numerator factor `c(x)`, ascending (`[1]` when none).
     #[serde(default = "one_poly")]
     pub num_poly: Vec<f64>,
+    /// An exact-hold mode whose numerator shape follows from its poles (then
+    /// `num_poly` is recomputed on reading).
+    #[serde(default)]
+    pub zoh_shape: bool,
 }
 
 fn one_poly() -> Vec<f64> {
@@ -246,6 +250,7 @@ impl ModelFile {
                     num_start: s.num_start,
                     num: s.num.iter().map(rows).collect(),
                     num_poly: s.num_poly.clone(),
+                    zoh_shape: s.zoh_shape,
                 })
                 .collect(),
             dynamics: model.dynamics.clone(),
@@ -307,6 +312,7 @@ impl ModelFile {
                 num,
                 scale: s.scale,
                 num_poly: s.num_poly.clone(),
+                zoh_shape: s.zoh_shape,
             })?;
         }
         Ok(m)

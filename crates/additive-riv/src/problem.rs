@@ -213,6 +213,11 @@ pub fn pack(model: &AdditiveModel, lay: &Layout) -> (Vec<f64>, Vec<f64>) {
 
 /// Writes the solver vectors into a model.
 pub fn unpack(model: &mut AdditiveModel, lay: &Layout, shared: &[f64], eta: &[f64]) {
+    unpack_raw(model, lay, shared, eta);
+    model.sync_shapes();
+}
+
+fn unpack_raw(model: &mut AdditiveModel, lay: &Layout, shared: &[f64], eta: &[f64]) {
     let (ny, nu) = (
         frf_data::ModelStructure::ny(model),
         frf_data::ModelStructure::nu(model),
@@ -273,6 +278,15 @@ pub struct Basis {
     pub dlnf: Vec<C64>,
     /// Whether factor parameter `q` affects entry `e`: `[q * m + e]`.
     pub dlnf_mask: Vec<bool>,
+    /// `(d, j)`: denominator coefficient `d` and numerator coefficient `j` of the same
+    /// submodel; `du[p]` is `d u_j / d a_d` for pair `p`.
+    pub pairs: Vec<(usize, usize)>,
+    /// Pairs of each denominator coefficient: `pairs[pair_range[d].clone()]`.
+    pub pair_range: Vec<std::ops::Range<usize>>,
+    /// `Re d u_j / d a_d` at `[p * n + k]`.
+    pub du_re: Vec<f64>,
+    /// `Im d u_j / d a_d` at `[p * n + k]`.
+    pub du_im: Vec<f64>,
 }
 
 impl Basis {
@@ -290,6 +304,49 @@ impl Basis {
         let n_fp = usize::from(lay.fit_delay) + lay.n_factor;
         let mut dlnf = vec![C64::new(0.0, 0.0); n * n_fp];
         let mut dlnf_mask = vec![false; n_fp * m];
+        // pairs (d, j) per submodel
+        let mut pairs = Vec::new();
+        let mut pair_range = Vec::with_capacity(lay.n_den);
+        for (i, s) in model.submodels.iter().enumerate() {
+            for r in 0..s.den.len() {
+                let start = pairs.len();
+                for t in 0..s.num.len() {
+                    pairs.push((lay.den_offset[i] + r, lay.num_offset[i] + t));
+                }
+                pair_range.push(start..pairs.len());
+            }
+        }
+        let mut du_re = vec![0.0; n * pairs.len()];
+        let mut du_im = vec![0.0; n * pairs.len()];
+        // exact-hold modes: derivative of the pole-dependent numerator shape by central
+        // differences of (beta_1, beta_2) with respect to (a_1, a_2)
+        let ts = match model.domain() {
+            crate::Domain::ZohDiscrete { ts } => ts,
+            crate::Domain::Continuous => 1.0,
+        };
+        let dshape: Vec<Option<[[f64; 2]; 2]>> = model
+            .submodels
+            .iter()
+            .map(|s| {
+                if !s.zoh_shape {
+                    return None;
+                }
+                let mut out = [[0.0; 2]; 2];
+                for r in 0..2 {
+                    let h = 1e-6 * s.den[r].abs().max(1e-6);
+                    let mut up = s.den.clone();
+                    let mut dn = s.den.clone();
+                    up[r] += h;
+                    dn[r] -= h;
+                    let (bu, bd) = (
+                        crate::model::zoh_mode_shape(&up, ts)?,
+                        crate::model::zoh_mode_shape(&dn, ts)?,
+                    );
+                    out[r] = [(bu[0] - bd[0]) / (2.0 * h), (bu[1] - bd[1]) / (2.0 * h)];
+                }
+                Some(out)
+            })
+            .collect();
         for (k, &w) in omega.iter().enumerate() {
             for (i, s) in model.submodels.iter().enumerate() {
                 let x = model.variable(s, w);
@@ -310,6 +367,18 @@ impl Basis {
                     let d = lay.den_offset[i] + t;
                     d_re[d * n + k] = v.re;
                     d_im[d * n + k] = v.im;
+                    // d u_j / d a_t = -x^t u_j / A (+ the shape's own derivative)
+                    for p in pair_range[d].clone() {
+                        let j = pairs[p].1;
+                        let uj = C64::new(u_re[j * n + k], u_im[j * n + k]);
+                        let mut du = v * uj;
+                        if let Some(ds) = &dshape[i] {
+                            let dc = C64::new(ds[t][0], 0.0) * x + C64::new(ds[t][1], 0.0) * x * x;
+                            du += dc / (model.integrator_factor(s.integrators, x) * a);
+                        }
+                        du_re[p * n + k] = du.re;
+                        du_im[p * n + k] = du.im;
+                    }
                     xr *= x;
                 }
             }
@@ -371,6 +440,10 @@ impl Basis {
             f_inv,
             dlnf,
             dlnf_mask,
+            pairs,
+            pair_range,
+            du_re,
+            du_im,
         }
     }
 

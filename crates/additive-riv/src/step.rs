@@ -78,6 +78,7 @@ fn fill_entry(
     basis: &Basis,
     el: &EntryLines,
     method: IvMethod,
+    be: &[f64],
     y: &mut Mat<f64>,
     x: &mut Mat<f64>,
 ) {
@@ -98,33 +99,43 @@ fn fill_entry(
         }
         x.col_as_slice_mut(j).copy_from_slice(y.col_as_slice(j));
     }
-    // denominator columns: d * P_i (instrument) and d * (E + P_i) (regressor)
-    for (i, &(d0, cnt)) in den_groups.iter().enumerate() {
-        let pr = &el.p_re[i * n..(i + 1) * n];
-        let pi = &el.p_im[i * n..(i + 1) * n];
+    // denominator columns: the instrument is d P_i / d a = sum_j B_j d u_j / d a (the
+    // gradient (12)); the regressor (14) adds d * E (it uses E + P_i where the
+    // instrument uses P_i). SK uses the regressor for both (Remark 1).
+    let mut inst = vec![0.0; 2 * n];
+    for (d0, cnt) in den_groups.iter().copied() {
         for d in d0..d0 + cnt {
             let dr = &basis.d_re[d * n..(d + 1) * n];
             let di = &basis.d_im[d * n..(d + 1) * n];
+            inst.fill(0.0);
+            {
+                let (ir, ii) = inst.split_at_mut(n);
+                for p in basis.pair_range[d].clone() {
+                    let b = be[basis.pairs[p].1];
+                    let ur = &basis.du_re[p * n..(p + 1) * n];
+                    let ui = &basis.du_im[p * n..(p + 1) * n];
+                    for k in 0..n {
+                        ir[k] += b * ur[k] * s[k];
+                        ii[k] += b * ui[k] * s[k];
+                    }
+                }
+            }
+            let (ir, ii) = inst.split_at(n);
             {
                 let col = x.col_as_slice_mut(nn + d);
                 let (cr, ci) = col.split_at_mut(n);
                 for k in 0..n {
-                    let gr = (el.e_re[k] + pr[k]) * s[k];
-                    let gi = (el.e_im[k] + pi[k]) * s[k];
-                    cr[k] = dr[k] * gr - di[k] * gi;
-                    ci[k] = dr[k] * gi + di[k] * gr;
+                    let er = el.e_re[k] * s[k];
+                    let ei = el.e_im[k] * s[k];
+                    cr[k] = ir[k] + dr[k] * er - di[k] * ei;
+                    ci[k] = ii[k] + dr[k] * ei + di[k] * er;
                 }
             }
-            // SK: the instrument is the regressor itself (Remark 1)
-            let with_e = if method == IvMethod::Riv { 0.0 } else { 1.0 };
-            let col = y.col_as_slice_mut(nn + d);
-            let (cr, ci) = col.split_at_mut(n);
-            for k in 0..n {
-                let qr = (with_e * el.e_re[k] + pr[k]) * s[k];
-                let qi = (with_e * el.e_im[k] + pi[k]) * s[k];
-                cr[k] = dr[k] * qr - di[k] * qi;
-                ci[k] = dr[k] * qi + di[k] * qr;
+            if method == IvMethod::Sk {
+                let xc = x.col_as_slice(nn + d);
+                inst.copy_from_slice(xc);
             }
+            y.col_as_slice_mut(nn + d).copy_from_slice(&inst);
         }
     }
     // factor parameters (delay, dynamics): d(y - P)/d theta = -y d ln F / d theta, so
@@ -243,7 +254,18 @@ fn step_structured(
      -> Result<EntryParts, RivError> {
         let (y, x, z, el) = bufs;
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        fill_entry(e, data, lay, &dg, basis, el, method, y, x);
+        fill_entry(
+            e,
+            data,
+            lay,
+            &dg,
+            basis,
+            el,
+            method,
+            &eta[e * nn..(e + 1) * nn],
+            y,
+            x,
+        );
         // Z = Y^T X : (nn + ns) x (nn + ns + 1)
         matmul(
             z.as_mut(),
@@ -395,7 +417,18 @@ fn step_dense(
     let mut el = EntryLines::default();
     for e in 0..m {
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        fill_entry(e, data, lay, &dg, basis, &el, method, &mut y, &mut x);
+        fill_entry(
+            e,
+            data,
+            lay,
+            &dg,
+            basis,
+            &el,
+            method,
+            &eta[e * nn..(e + 1) * nn],
+            &mut y,
+            &mut x,
+        );
         for row in 0..2 * n {
             let rr = e * 2 * n + row;
             for c in 0..ns {
