@@ -5,11 +5,16 @@
 //! the `frfit` command-line tool. The estimators live in their own crates and are
 //! re-exported here so that a user can depend on `frfit` alone.
 
+pub mod declared;
 pub mod error;
+pub mod pipeline;
 pub mod plots;
+pub mod report;
 pub mod summary;
 
 pub use error::FrfitError;
 
+pub use additive_riv;
 pub use frf_data;
 pub use realize;
+pub use validation;
