@@ -41,6 +41,14 @@ pub fn with_feedthrough(model: &AdditiveModel) -> Result<AdditiveModel, RivError
     Ok(m)
 }
 
+/// Adds a constant crosstalk that bypasses the known delay and hold (see
+/// [`crate::Submodel::bypass_factor`]).
+pub fn with_crosstalk(model: &AdditiveModel) -> Result<AdditiveModel, RivError> {
+    let mut m = model.clone();
+    m.push_bypass_feedthrough()?;
+    Ok(m)
+}
+
 /// Replaces the free rigid body `B / s^2` by a suspended one
 /// `B / (s^2 + 2 zeta w_s s + w_s^2)` (a stiffness), kind [`SubmodelKind::Suspension`].
 pub fn with_stiffness(
@@ -115,6 +123,9 @@ pub fn to_exact_hold(model: &AdditiveModel, fs_hz: f64) -> Result<AdditiveModel,
         match s.kind {
             SubmodelKind::RigidBody => {
                 m.push_rigid_body(s.integrators, 1.0)?;
+            }
+            SubmodelKind::Feedthrough if s.bypass_factor => {
+                m.push_bypass_feedthrough()?;
             }
             SubmodelKind::Feedthrough => {
                 m.push_feedthrough()?;

@@ -83,6 +83,10 @@ pub struct Submodel {
     /// step with `den` by [`AdditiveModel::sync_shapes`]. One numerator matrix per mode,
     /// as in continuous time (eq. 26), instead of two free ones that could absorb a delay.
     pub zoh_shape: bool,
+    /// The submodel bypasses the known factor's delay (and hold and derivative): the
+    /// model is `F (sum of the others) + this`. Crosstalk that couples the actuator signal
+    /// into the sensor electrically does not see the plant's hold and computation delay.
+    pub bypass_factor: bool,
 }
 
 /// `(beta_1, beta_2)` of the zero-order-hold image of `1 / ((s - p_1)(s - p_2))` whose
@@ -175,6 +179,7 @@ impl Submodel {
             num,
             num_poly: vec![1.0],
             zoh_shape: false,
+            bypass_factor: false,
             ..self.clone()
         }
     }
@@ -451,6 +456,7 @@ impl AdditiveModel {
             scale,
             num_poly,
             zoh_shape: false,
+            bypass_factor: false,
         });
         Ok(self.submodels.len() - 1)
     }
@@ -483,6 +489,7 @@ impl AdditiveModel {
                 scale: wn,
                 num_poly: vec![1.0],
                 zoh_shape: false,
+            bypass_factor: false,
             },
             Domain::ZohDiscrete { ts } => {
                 if wn * ts >= PI {
@@ -503,6 +510,7 @@ impl AdditiveModel {
                     scale: 1.0,
                     num_poly: vec![1.0],
                     zoh_shape: true,
+                    bypass_factor: false,
                 };
                 sub.sync_shape(ts);
                 sub
@@ -510,6 +518,13 @@ impl AdditiveModel {
         };
         self.submodels.push(sub);
         Ok(self.submodels.len() - 1)
+    }
+
+    /// Adds a feedthrough that bypasses the known factor (see [`Submodel::bypass_factor`]).
+    pub fn push_bypass_feedthrough(&mut self) -> Result<usize, RivError> {
+        let i = self.push_feedthrough()?;
+        self.submodels[i].bypass_factor = true;
+        Ok(i)
     }
 
     /// Adds a feedthrough (constant, biproper) submodel `D`; at most one is allowed.
@@ -532,6 +547,7 @@ impl AdditiveModel {
             scale: 1.0,
             num_poly: vec![1.0],
             zoh_shape: false,
+            bypass_factor: false,
         });
         Ok(self.submodels.len() - 1)
     }
@@ -757,10 +773,15 @@ impl AdditiveModel {
 
     /// The rational part (without the known factor) at `omega`, into `out` (`vec(P)`).
     pub fn rational_into(&self, omega: f64, out: &mut [C64]) {
+        self.rational_part_into(omega, out, false);
+    }
+
+    /// Sums the submodels that bypass the factor (`bypass = true`) or the others.
+    fn rational_part_into(&self, omega: f64, out: &mut [C64], bypass: bool) {
         let m = self.ny * self.nu;
         out[..m].fill(C64::new(0.0, 0.0));
         let mut basis = Vec::with_capacity(4);
-        for sub in &self.submodels {
+        for sub in self.submodels.iter().filter(|s| s.bypass_factor == bypass) {
             basis.clear();
             self.basis_into(sub, omega, &mut basis);
             for (b, coef) in sub.num.iter().zip(&basis) {
@@ -1267,11 +1288,18 @@ impl ModelStructure for AdditiveModel {
         Ok(())
     }
     fn response_into(&self, omega: f64, out: &mut [C64]) {
-        self.rational_into(omega, out);
+        self.rational_part_into(omega, out, false);
         if !self.factor.is_identity() {
             let f = self.factor.at(omega);
             for v in out.iter_mut() {
                 *v *= f;
+            }
+        }
+        if self.submodels.iter().any(|s| s.bypass_factor) {
+            let mut extra = vec![C64::new(0.0, 0.0); out.len()];
+            self.rational_part_into(omega, &mut extra, true);
+            for (o, x) in out.iter_mut().zip(&extra) {
+                *o += x;
             }
         }
         for d in &self.dynamics {

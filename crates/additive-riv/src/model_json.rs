@@ -78,6 +78,9 @@ pub struct SubmodelJson {
     /// `num_poly` is recomputed on reading).
     #[serde(default)]
     pub zoh_shape: bool,
+    /// The submodel bypasses the known factor (delay, hold): crosstalk.
+    #[serde(default)]
+    pub bypass_factor: bool,
 }
 
 fn one_poly() -> Vec<f64> {
@@ -251,6 +254,7 @@ impl ModelFile {
                     num: s.num.iter().map(rows).collect(),
                     num_poly: s.num_poly.clone(),
                     zoh_shape: s.zoh_shape,
+                    bypass_factor: s.bypass_factor,
                 })
                 .collect(),
             dynamics: model.dynamics.clone(),
@@ -313,6 +317,7 @@ impl ModelFile {
                 scale: s.scale,
                 num_poly: s.num_poly.clone(),
                 zoh_shape: s.zoh_shape,
+                bypass_factor: s.bypass_factor,
             })?;
         }
         Ok(m)

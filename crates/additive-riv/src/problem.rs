@@ -278,6 +278,8 @@ pub struct Basis {
     pub dlnf: Vec<C64>,
     /// Whether factor parameter `q` affects entry `e`: `[q * m + e]`.
     pub dlnf_mask: Vec<bool>,
+    /// Submodels that bypass the known factor (their response depends on the delay too).
+    pub bypass: Vec<bool>,
     /// `(d, j)`: denominator coefficient `d` and numerator coefficient `j` of the same
     /// submodel; `du[p]` is `d u_j / d a_d` for pair `p`.
     pub pairs: Vec<(usize, usize)>,
@@ -348,10 +350,15 @@ impl Basis {
             })
             .collect();
         for (k, &w) in omega.iter().enumerate() {
+            let f0_inv = model.factor.at(w).inv();
             for (i, s) in model.submodels.iter().enumerate() {
                 let x = model.variable(s, w);
                 let a = s.den_at(x);
-                let pa = s.num_poly_at(x) / (model.integrator_factor(s.integrators, x) * a);
+                let mut pa = s.num_poly_at(x) / (model.integrator_factor(s.integrators, x) * a);
+                if s.bypass_factor {
+                    // the divided problem sees this submodel divided by the known factor
+                    pa *= f0_inv;
+                }
                 let mut xr = x.powi(s.num_start as i32);
                 for t in 0..s.num.len() {
                     let v = xr * pa;
@@ -444,6 +451,7 @@ impl Basis {
             pair_range,
             du_re,
             du_im,
+            bypass: model.submodels.iter().map(|s| s.bypass_factor).collect(),
         }
     }
 

@@ -119,8 +119,54 @@ fn rel_norm(d: &[f64], x: &[f64]) -> f64 {
     }
 }
 
+/// SK steps of the rescue when the refined-IV iterations stop far from the optimum.
+pub const SK_RESCUE: usize = 10;
+
 /// The iterations of Algorithm 1 from `model` on `data`.
-pub fn iterate(
+///
+/// Far from the optimum the refined instrument can point uphill, and the iterations
+/// then stop with no descent. In that case (with the RIV method) they are restarted
+/// from `model` with up to [`SK_RESCUE`] Sanathanan-Koerner iterations (Remark 1: the
+/// regressor as its own instrument, robust far away but biased at its fixed point),
+/// followed by Algorithm 1 again, whose fixed point is the optimum of (8); the fit's
+/// messages say so.
+pub fn iterate(model: AdditiveModel, data: &FitData, cfg: &RivConfig) -> Result<Fit<AdditiveModel>, RivError> {
+    let first = iterate_core(model.clone(), data, cfg)?;
+    let stalled = matches!(first.convergence, Convergence::Failed { .. }) && cfg.method == IvMethod::Riv;
+    if !stalled {
+        return Ok(first);
+    }
+    let sk_cfg = RivConfig {
+        method: IvMethod::Sk,
+        max_iterations: SK_RESCUE,
+        progress: ProgressSink::none(),
+        ..cfg.clone()
+    };
+    let sk = iterate_core(model, data, &sk_cfg)?;
+    let mut second = iterate_core(sk.model, data, cfg)?;
+    let c_first = first.final_cost().unwrap_or(f64::INFINITY);
+    let c_second = second.final_cost().unwrap_or(f64::INFINITY);
+    if c_second > c_first {
+        return Ok(first);
+    }
+    let mut history = first.cost_history.clone();
+    history.extend_from_slice(&sk.cost_history);
+    history.extend_from_slice(&second.cost_history);
+    second.cost_history = history;
+    second.iterations += first.iterations + sk.iterations;
+    second.messages.insert(
+        0,
+        format!(
+            "the refined-IV iterations stopped far from the optimum ({}); restarted with {} SK \
+             iterations, then refined-IV again",
+            first.convergence.describe(),
+            sk.iterations
+        ),
+    );
+    Ok(second)
+}
+
+fn iterate_core(
     mut model: AdditiveModel,
     data: &FitData,
     cfg: &RivConfig,
@@ -169,6 +215,7 @@ pub fn iterate(
     let mut small_cost_steps = 0;
     let mut worst_cond: f64 = 1.0;
     let mut non_descent = 0;
+    let method = cfg.method;
     for it in 1..=cfg.max_iterations {
         iterations = it;
         let upd = match step(
@@ -177,7 +224,7 @@ pub fn iterate(
             &subs,
             &basis,
             &eta,
-            cfg.method,
+            method,
             cfg.solver,
             cfg.parallel,
         ) {

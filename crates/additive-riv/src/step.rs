@@ -142,15 +142,35 @@ fn fill_entry(
     // the regressor is y d ln F and the instrument P d ln F (SK: y d ln F)
     let m = data.m();
     let n_fp = ns - nd;
+    // submodels that bypass the known factor depend on the delay as well: their part
+    // of the divided model moves with y (d(P_b)/d tau = -P_b d ln F)
+    let mut pb_re = vec![0.0; if lay.fit_delay { n } else { 0 }];
+    let mut pb_im = vec![0.0; pb_re.len()];
+    if lay.fit_delay {
+        for (i, &b) in basis.bypass.iter().enumerate() {
+            if b {
+                for k in 0..n {
+                    pb_re[k] += el.p_re[i * n + k];
+                    pb_im[k] += el.p_im[i * n + k];
+                }
+            }
+        }
+    }
     for q in 0..n_fp {
         let on = basis.dlnf_mask[q * m + e];
         let dl = &basis.dlnf[q * n..(q + 1) * n];
+        let is_delay = lay.fit_delay && q == 0;
         {
             let col = x.col_as_slice_mut(nn + nd + q);
             let (cr, ci) = col.split_at_mut(n);
             for k in 0..n {
                 if on {
-                    let (yr, yi) = (el.y_re[k] * s[k], el.y_im[k] * s[k]);
+                    let (mut yr, mut yi) = (el.y_re[k], el.y_im[k]);
+                    if is_delay {
+                        yr -= pb_re[k];
+                        yi -= pb_im[k];
+                    }
+                    let (yr, yi) = (yr * s[k], yi * s[k]);
                     cr[k] = dl[k].re * yr - dl[k].im * yi;
                     ci[k] = dl[k].re * yi + dl[k].im * yr;
                 } else {
@@ -163,11 +183,15 @@ fn fill_entry(
         let (cr, ci) = col.split_at_mut(n);
         for k in 0..n {
             if on {
-                let (pr, pi) = if method == IvMethod::Riv {
+                let (mut pr, mut pi) = if method == IvMethod::Riv {
                     (el.y_re[k] - el.e_re[k], el.y_im[k] - el.e_im[k])
                 } else {
                     (el.y_re[k], el.y_im[k])
                 };
+                if is_delay {
+                    pr -= pb_re[k];
+                    pi -= pb_im[k];
+                }
                 let (pr, pi) = (pr * s[k], pi * s[k]);
                 cr[k] = dl[k].re * pr - dl[k].im * pi;
                 ci[k] = dl[k].re * pi + dl[k].im * pr;

@@ -184,7 +184,7 @@ impl ResidualStats {
 /// Candidate frequencies (Hz) of missed modes: local maxima of the per-line weighted
 /// residual statistic ([`ResidualStats`]) that exceed both its Bonferroni-corrected
 /// threshold and [`PEAK_OVER_LOCAL`] times its local median (within +-10 % in
-/// frequency), strongest first, with the ratio to the larger of the two. The local test
+/// frequency), the largest statistic first, with the ratio to the larger of the two. The local test
 /// keeps a broadband misfit (a delay, a hold) from being taken for modes, and measured
 /// noise, whose peaks reach about 3 times the local median, from being fitted.
 pub fn residual_peaks(
@@ -196,7 +196,7 @@ pub fn residual_peaks(
     let n = data.n;
     let thr = stats.threshold(alpha / n as f64);
     let t = &stats.t;
-    let mut peaks: Vec<(f64, f64)> = Vec::new();
+    let mut peaks: Vec<(f64, f64, f64)> = Vec::new();
     for k in 0..n {
         if t[k] <= thr {
             continue;
@@ -211,12 +211,20 @@ pub fn residual_peaks(
         }
         let level = thr.max(PEAK_OVER_LOCAL * stats.local_median(&data.omega, k, 0.1));
         if t[k] > level {
-            peaks.push((f, t[k] / level));
+            peaks.push((f, t[k] / level, t[k]));
         }
     }
-    peaks.sort_by(|a, b| b.1.total_cmp(&a.1));
-    peaks
+    // strongest first: the largest statistic (a strong missed mode also raises its own
+    // local level, so the ratio would understate it)
+    peaks.sort_by(|a, b| b.2.total_cmp(&a.2));
+    peaks.into_iter().map(|(f, r, _)| (f, r)).collect()
 }
+
+/// Two modes are one when their poles are closer than this fraction of their mean
+/// `|Re p|` (half the half-power bandwidth): close modes with different shapes are
+/// often nearer than a bandwidth and must stay apart, but two submodels on practically
+/// the same pole are not identifiable.
+pub const DUPLICATE_FRACTION: f64 = 0.05;
 
 /// How far above its local median a residual peak must rise to be a mode candidate.
 pub const PEAK_OVER_LOCAL: f64 = 10.0;
@@ -318,7 +326,7 @@ fn drop_pass(
                 continue;
             };
             let bw = 0.5 * (pa.re.abs() + pb.re.abs());
-            if (pa - pb).norm() < 0.5 * bw {
+            if (pa - pb).norm() < DUPLICATE_FRACTION * bw {
                 let (keep, go) = if pa.re.abs() <= pb.re.abs() {
                     (a, b)
                 } else {

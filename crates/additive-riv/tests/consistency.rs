@@ -178,3 +178,35 @@ fn dynamics_factor_and_delay_recovered() {
         assert!(max_rel_param_error(&f.model, &truth) < 1e-8);
     }
 }
+
+/// A crosstalk that bypasses the delay is recovered together with the delay.
+#[test]
+fn bypass_feedthrough_with_fitted_delay_recovered() {
+    use additive_riv::KnownFactor;
+    use frf_data::ModelStructure;
+    let case = random_case(21, 2, 2, 3, true, Domain::ZohDiscrete { ts: 1.0 / 2000.0 });
+    let mut truth = case
+        .truth
+        .clone()
+        .with_factor(KnownFactor { delay_s: 5e-4, fit_delay: true, ..Default::default() })
+        .unwrap();
+    let i = truth.push_bypass_feedthrough().unwrap();
+    for j in 0..2 {
+        for r in 0..2 {
+            truth.submodels[i].num[0][(r, j)] = 1e-2 * (1.0 + r as f64 - j as f64);
+        }
+    }
+    let data = simulate(&truth, &case.freqs, 0.0, 21);
+    let fd = FitData::new(&data, &Weighting::InverseMagnitude).unwrap();
+    let mut start = perturbed_start(&case, 0.01, 21)
+        .with_factor(KnownFactor { delay_s: 4.7e-4, fit_delay: true, ..Default::default() })
+        .unwrap();
+    start.push_bypass_feedthrough().unwrap();
+    fit_numerators(&mut start, &fd).unwrap();
+    let f = AdditiveRiv::new(RivConfig::default()).refine(start, &fd).unwrap();
+    assert!(f.convergence.is_converged(), "{:?}", f.convergence);
+    let (p, q) = (f.model.params(), truth.params());
+    let n = p.len();
+    assert!((p[n - 1] - q[n - 1]).abs() < 1e-12, "delay {} vs {}", p[n - 1], q[n - 1]);
+    assert!(max_rel_param_error(&f.model, &truth) < 1e-8);
+}

@@ -13,6 +13,10 @@ pub struct Declared {
     pub fs_hz: Option<f64>,
     /// The known delay (hold + computation), seconds.
     pub delay_s: Option<f64>,
+    /// The file says the measurement went through a zero-order hold (at `fs_hz`):
+    /// a comment that names a "hold" and says it is present ("present: True",
+    /// "hold present") and not absent ("False", "no hold").
+    pub zoh: bool,
     /// Where each value came from (for reports).
     pub sources: Vec<String>,
 }
@@ -121,6 +125,15 @@ pub fn declared(frf: &Frf) -> Declared {
         }
     }
     for c in &frf.comments {
+        let lower = c.to_ascii_lowercase();
+        if lower.contains("hold") && !d.zoh {
+            let absent = lower.contains("false") || lower.contains("no hold") || lower.contains("without hold");
+            let present = lower.contains("true") || lower.contains("present") || lower.contains("zero-order hold");
+            if present && !absent {
+                d.zoh = true;
+                d.sources.push(format!("zero-order hold from the comment \"{}\"", c.trim()));
+            }
+        }
         if d.fs_hz.is_none() {
             if let Some(x) = after_keyword(c, "sampling", hz_unit)
                 .or_else(|| after_keyword(c, "sample rate", hz_unit))
@@ -169,7 +182,10 @@ mod tests {
         let d = declared(&f);
         assert_eq!(d.fs_hz, Some(10_000.0));
         assert!((d.delay_s.unwrap() - 150e-6).abs() < 1e-12);
-        assert_eq!(d.sources.len(), 2);
+        assert!(d.zoh);
+        assert_eq!(d.sources.len(), 3);
+        let f = frf_with(&["sampling 10 kHz; hold and computation delay ~150 us present: False"], &[]);
+        assert!(!declared(&f).zoh);
     }
 
     #[test]
