@@ -174,6 +174,22 @@ pub struct LinePlot {
     pub markers: Vec<Marker>,
     /// Draw a legend of the named series.
     pub legend: bool,
+    /// Where the legend goes.
+    pub legend_corner: Corner,
+}
+
+/// A corner of a panel (for the legend).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Corner {
+    /// Top right (the default).
+    #[default]
+    UpperRight,
+    /// Top left.
+    UpperLeft,
+    /// Bottom left.
+    LowerLeft,
+    /// Bottom right.
+    LowerRight,
 }
 
 impl LinePlot {
@@ -186,6 +202,7 @@ impl LinePlot {
             series: Vec::new(),
             markers: Vec::new(),
             legend: true,
+            legend_corner: Corner::UpperRight,
         }
     }
     /// Replaces the horizontal axis.
@@ -235,12 +252,37 @@ impl LinePlot {
             &self.markers,
             false,
         );
+        let (xb, xl) = log_ticks(x0, x1);
+        let (yb, yl) = log_ticks(y0, y1);
         match (self.x.scale, self.y.scale) {
-            (Scale::Log, Scale::Log) => {
-                self.draw_in(area, (x0..x1).log_scale(), (y0..y1).log_scale())
-            }
-            (Scale::Log, Scale::Linear) => self.draw_in(area, (x0..x1).log_scale(), y0..y1),
-            (Scale::Linear, Scale::Log) => self.draw_in(area, x0..x1, (y0..y1).log_scale()),
+            (Scale::Log, Scale::Log) => self.draw_in(
+                area,
+                (x0..x1)
+                    .log_scale()
+                    .with_key_points(xb)
+                    .with_light_points(xl),
+                (y0..y1)
+                    .log_scale()
+                    .with_key_points(yb)
+                    .with_light_points(yl),
+            ),
+            // Linear axes keep plotters' own (good) tick choice.
+            (Scale::Log, Scale::Linear) => self.draw_in(
+                area,
+                (x0..x1)
+                    .log_scale()
+                    .with_key_points(xb)
+                    .with_light_points(xl),
+                y0..y1,
+            ),
+            (Scale::Linear, Scale::Log) => self.draw_in(
+                area,
+                x0..x1,
+                (y0..y1)
+                    .log_scale()
+                    .with_key_points(yb)
+                    .with_light_points(yl),
+            ),
             (Scale::Linear, Scale::Linear) => self.draw_in(area, x0..x1, y0..y1),
         }
     }
@@ -264,6 +306,7 @@ impl LinePlot {
         let mut builder = ChartBuilder::on(area);
         builder
             .margin(if small { 4 } else { 10 })
+            .margin_right(if small { 14 } else { 28 })
             .x_label_area_size(if small { 30 } else { 45 })
             .y_label_area_size(if small { 52 } else { 70 });
         if !self.title.is_empty() {
@@ -272,8 +315,8 @@ impl LinePlot {
         let mut chart = builder.build_cartesian_2d(xr, yr).map_err(err)?;
         let x_log = self.x.scale == Scale::Log;
         let y_log = self.y.scale == Scale::Log;
-        let xf = move |v: &f64| fmt_tick(*v, x_log);
-        let yf = move |v: &f64| fmt_tick(*v, y_log);
+        let xf = |v: &f64| fmt_tick(*v);
+        let yf = |v: &f64| fmt_tick(*v);
         chart
             .configure_mesh()
             .x_desc(self.x.label.as_str())
@@ -342,6 +385,12 @@ impl LinePlot {
         }
         let (ax0, ay0) = chart.plotting_area().get_base_pixel();
         for m in &marks {
+            // The dots are obstacles for the labels.
+            let (px, py) = chart.backend_coord(&(m.x, m.y));
+            let (px, py) = (px - ax0, py - ay0);
+            placed.push((px - 4, py - 4, px + 4, py + 4));
+        }
+        for m in &marks {
             let Some(text) = &m.label else { continue };
             let (px, py) = chart.backend_coord(&(m.x, m.y));
             let (px, py) = (px - ax0, py - ay0);
@@ -384,7 +433,12 @@ impl LinePlot {
         if self.legend && any_named {
             chart
                 .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
+                .position(match self.legend_corner {
+                    Corner::UpperRight => SeriesLabelPosition::UpperRight,
+                    Corner::UpperLeft => SeriesLabelPosition::UpperLeft,
+                    Corner::LowerLeft => SeriesLabelPosition::LowerLeft,
+                    Corner::LowerRight => SeriesLabelPosition::LowerRight,
+                })
                 .label_font(("sans-serif", font))
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
@@ -496,6 +550,11 @@ fn axis_range<'a>(
     if !(lo.is_finite() && hi.is_finite()) {
         return if log { (1.0, 10.0) } else { (0.0, 1.0) };
     }
+    if log && is_x {
+        // Snap to a neighbouring 1-2-5 value within 3 % so that the ends get a label
+        // (data on 20.25..1999.75 Hz show 20..2000 Hz).
+        return (snap125(lo, false), snap125(hi, true));
+    }
     if log {
         let (l, h) = (lo.log10(), hi.log10());
         let span = (h - l).max(1e-3);
@@ -517,22 +576,89 @@ fn axis_range<'a>(
     }
 }
 
-/// Tick label: plain numbers for ordinary magnitudes, `1e-6` style otherwise.
-fn fmt_tick(v: f64, log: bool) -> String {
-    let a = v.abs();
-    if v == 0.0 {
-        "0".into()
-    } else if (1e-2..1e5).contains(&a) {
-        let s = if a >= 100.0 || (log && (a - a.round()).abs() < 1e-9) {
-            format!("{v:.0}")
-        } else {
-            let s = format!("{v:.3}");
-            s.trim_end_matches('0').trim_end_matches('.').to_string()
-        };
-        s
+/// Labelled (bold) and minor (light) tick positions of a log axis on `[lo, hi]`: with
+/// up to about two decades, labels at 1, 2, 5 times powers of ten and minor lines at
+/// every integer multiple; with more, labels at the decades (every second or third one
+/// when there are many) and minor lines at the integer multiples while there are at most
+/// six decades. (Empty for an invalid range; linear axes use plotters' ticks.)
+fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    if !(lo > 0.0 && hi > lo && lo.is_finite() && hi.is_finite()) {
+        return (Vec::new(), Vec::new());
+    }
+    let inside = |v: f64| v >= lo * (1.0 - 1e-12) && v <= hi * (1.0 + 1e-12);
+    let (d0, d1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    let decades = hi.log10() - lo.log10();
+    let stride = if decades <= 8.0 {
+        1
+    } else if decades <= 16.0 {
+        2
     } else {
-        let s = format!("{v:.0e}");
-        s
+        3
+    };
+    let mut bold = Vec::new();
+    let mut light = Vec::new();
+    for d in d0..=d1 {
+        let p = 10f64.powi(d);
+        if decades <= 2.2 {
+            for m in [1.0, 2.0, 5.0] {
+                if inside(m * p) {
+                    bold.push(m * p);
+                }
+            }
+        } else if d.rem_euclid(stride) == 0 && inside(p) {
+            bold.push(p);
+        }
+        if decades <= 6.0 {
+            for m in 1..10 {
+                let v = m as f64 * p;
+                if inside(v) {
+                    light.push(v);
+                }
+            }
+        } else if inside(p) {
+            light.push(p);
+        }
+    }
+    if bold.len() < 2 {
+        // Less than a decade with at most one 1-2-5 point inside: label the minor lines.
+        bold = light.clone();
+    }
+    (bold, light)
+}
+
+/// The nearest 1-2-5 value above (`up`) or below `v`, when it is within 3 %; else `v`.
+fn snap125(v: f64, up: bool) -> f64 {
+    let p = 10f64.powf(v.log10().floor());
+    let cands = [p, 2.0 * p, 5.0 * p, 10.0 * p];
+    let best = if up {
+        cands.iter().copied().find(|&c| c >= v)
+    } else {
+        cands.iter().rev().copied().find(|&c| c <= v)
+    };
+    match best {
+        Some(c) if (c / v).ln().abs() <= 0.03f64.ln_1p() => c,
+        _ => v,
+    }
+}
+
+/// Tick label: plain numbers for ordinary magnitudes (up to three decimals, trailing
+/// zeros removed), `1.5e-7` style otherwise.
+fn fmt_tick(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    if (1e-2..1e5).contains(&a) {
+        let s = format!("{v:.3}");
+        return s.trim_end_matches('0').trim_end_matches('.').to_string();
+    }
+    let s = format!("{v:.2e}");
+    match s.split_once('e') {
+        Some((m, e)) => {
+            let m = m.trim_end_matches('0').trim_end_matches('.');
+            format!("{m}e{e}")
+        }
+        None => s,
     }
 }
 
@@ -540,12 +666,16 @@ fn fmt_tick(v: f64, log: bool) -> String {
 /// `sigma_i^2` against frequency on log axes, one line per singular value, the picked
 /// peaks as dots labelled with their frequency in Hz.
 pub fn cmif_plot(cmif: &Cmif, peaks: &[CmifPeak], title: &str) -> LinePlot {
-    let mut plot = LinePlot::new(title).with_y(Axis::log("sigma_i^2 (CMIF)"));
+    let mut plot = LinePlot::new(title).with_y(Axis::log("CMIF  σᵢ²"));
+    plot.legend_corner = Corner::LowerLeft;
     let f = cmif.freq_hz.clone();
     for i in 0..cmif.n_sv() {
         let y: Vec<f64> = cmif.sv2.iter().map(|row| row[i]).collect();
-        plot.series
-            .push(Series::line(format!("sigma_{}^2", i + 1), f.clone(), y));
+        plot.series.push(Series::line(
+            format!("σ{}²", subscript(i + 1)),
+            f.clone(),
+            y,
+        ));
     }
     // Keep the noise floor of rank-deficient data from squashing the curves: show at
     // most 12 decades below the largest value.
@@ -576,6 +706,17 @@ pub fn cmif_plot(cmif: &Cmif, peaks: &[CmifPeak], title: &str) -> LinePlot {
         });
     }
     plot
+}
+
+/// `n` in Unicode subscript digits.
+fn subscript(n: usize) -> String {
+    n.to_string()
+        .chars()
+        .map(|c| match c {
+            '0'..='9' => char::from_u32(0x2080 + c as u32 - '0' as u32).unwrap_or(c),
+            _ => c,
+        })
+        .collect()
 }
 
 fn fmt_hz(f: f64) -> String {
@@ -680,4 +821,141 @@ pub fn entry_overlay(
             .push(Series::line("noise std", f, s).with_color((127, 127, 127)));
     }
     p
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0);
+        std::env::temp_dir().join(format!(
+            "frfit-plots-{name}-{}-{nanos}.svg",
+            std::process::id()
+        ))
+    }
+
+    #[test]
+    fn log_ticks_follow_1_2_5_and_decades() {
+        let (b, l) = log_ticks(20.0, 2000.0);
+        assert_eq!(b, vec![20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0]);
+        assert!(l.contains(&30.0) && l.contains(&900.0));
+        let (b, l) = log_ticks(1e-16, 1e-6);
+        assert_eq!(b.len(), 6); // every second decade of ten
+        assert!(b
+            .iter()
+            .all(|v| (v.log10() - v.log10().round()).abs() < 1e-9));
+        assert_eq!(l.len(), 11);
+        let (b, _) = log_ticks(850.0, 1110.0);
+        assert!(b.len() >= 2, "{b:?}");
+        assert_eq!(log_ticks(-1.0, 2.0), (vec![], vec![]));
+        assert_eq!(log_ticks(f64::NAN, 2.0), (vec![], vec![]));
+    }
+
+    #[test]
+    fn snapping_and_labels() {
+        assert_eq!(snap125(20.25, false), 20.0);
+        assert_eq!(snap125(1999.75, true), 2000.0);
+        assert_eq!(snap125(31.0, false), 31.0);
+        assert_eq!(fmt_tick(2000.0), "2000");
+        assert_eq!(fmt_tick(0.25), "0.25");
+        assert_eq!(fmt_tick(1e-8), "1e-8");
+        assert_eq!(fmt_tick(1.5e-7), "1.5e-7");
+        assert_eq!(subscript(12), "₁₂");
+        assert_eq!(fmt_hz(35.0), "35.0");
+        assert_eq!(fmt_hz(1845.5), "1846");
+    }
+
+    #[test]
+    fn undrawable_values_break_lines() {
+        let s = Series::line(
+            "x",
+            vec![1.0, 2.0, 3.0, 4.0, 5.0],
+            vec![1.0, -1.0, 2.0, f64::NAN, 3.0],
+        );
+        let seg = segments(&s, true, true);
+        assert_eq!(
+            seg,
+            vec![vec![(1.0, 1.0)], vec![(3.0, 2.0)], vec![(5.0, 3.0)]]
+        );
+        assert_eq!(segments(&s, false, false).len(), 2);
+    }
+
+    #[test]
+    fn panels_and_grids_write_svg() {
+        // Every axis combination, an empty series, markers with labels.
+        for (xs, ys) in [
+            (Scale::Log, Scale::Log),
+            (Scale::Log, Scale::Linear),
+            (Scale::Linear, Scale::Log),
+            (Scale::Linear, Scale::Linear),
+        ] {
+            let mut p = LinePlot::new("panel")
+                .with_x(Axis {
+                    label: "x".into(),
+                    scale: xs,
+                    range: None,
+                })
+                .with_y(Axis {
+                    label: "y".into(),
+                    scale: ys,
+                    range: None,
+                })
+                .with_series(Series::line(
+                    "a",
+                    vec![1.0, 10.0, 100.0],
+                    vec![1e-3, 1e-1, 1e-2],
+                ))
+                .with_series(Series::dashed("b", vec![1.0, 100.0], vec![2e-3, 2e-2]))
+                .with_series(Series::points("", vec![], vec![]))
+                .with_marker(Marker {
+                    x: 10.0,
+                    y: 1e-1,
+                    label: Some("peak".into()),
+                    color: None,
+                });
+            p.legend_corner = Corner::LowerRight;
+            let path = tmp("panel");
+            p.write_svg(&path, (500, 300)).unwrap();
+            let text = std::fs::read_to_string(&path).unwrap();
+            assert!(text.contains("<svg") && text.contains("peak"));
+            let _ = std::fs::remove_file(&path);
+        }
+        // A panel with no data at all still draws.
+        let path = tmp("empty");
+        LinePlot::new("").write_svg(&path, (300, 200)).unwrap();
+        let _ = std::fs::remove_file(&path);
+        // A grid.
+        let f: Vec<f64> = (1..=50).map(|k| k as f64).collect();
+        let frf = frf_data::Frf::from_fn(f, 2, 2, |k, i, j| {
+            frf_data::C64::new(1.0 / (1.0 + k as f64), (i + j) as f64 * 0.1)
+        })
+        .unwrap();
+        let g = magnitude_grid("grid", &[("data", &frf as &dyn FrfDataset)]);
+        assert_eq!((g.rows, g.cols, g.panels.len()), (2, 2, 4));
+        let path = tmp("grid");
+        g.write_svg(&path).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.contains("G2_2"));
+        let _ = std::fs::remove_file(&path);
+        // An overlay of data and itself: the residual is zero (not drawable on a log
+        // axis), the other series are there.
+        let o = entry_overlay("overlay", &frf, &frf, 1, 0);
+        assert_eq!(o.series.len(), 3);
+        assert!(o.series[2].y.iter().all(|v| *v == 0.0));
+        let o = entry_overlay("overlay", &frf, &frf, 5, 0);
+        assert!(o.series.is_empty());
+    }
+
+    #[test]
+    fn unwritable_path_is_an_error() {
+        let p = LinePlot::new("x").with_series(Series::line("a", vec![1.0, 2.0], vec![1.0, 2.0]));
+        let e = p
+            .write_svg("/nonexistent-dir-frfit/x.svg", (300, 200))
+            .unwrap_err();
+        assert!(e.to_string().contains("nonexistent-dir-frfit"), "{e}");
+    }
 }

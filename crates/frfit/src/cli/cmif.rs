@@ -26,8 +26,9 @@ pub struct Args {
     /// Write the CMIF figure (singular values and picked peaks) to this SVG file.
     #[arg(long, value_name = "FILE")]
     pub svg: Option<PathBuf>,
-    /// Print JSON to stdout: {"peaks": [{"f_hz", "sv_index" (0-based), "prominence" (dB)}],
-    /// "band_hz": [lo, hi] (first and last line used), "n_lines"}.
+    /// Print JSON to stdout: {"peaks": [{"f_hz", "sv_index" (0-based), "prominence" (dB),
+    /// "damping" (half-power estimate or null), "line", "sv2"}], "band_hz": [lo, hi] (first
+    /// and last line used), "n_lines"}.
     #[arg(long)]
     pub json: bool,
 }
@@ -80,6 +81,7 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
                 "f_hz": p.f_hz,
                 "sv_index": p.sv_index,
                 "prominence": p.prominence,
+                "damping": p.damping,
                 "line": p.line,
                 "sv2": p.sv2,
             })).collect::<Vec<_>>(),
