@@ -110,20 +110,26 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         return Ok(());
     }
     println!(
-        "{:>4}  {:>12}  {:>6}  {:>16}",
-        "#", "f [Hz]", "sigma", "prominence [dB]"
+        "{:>4}  {:>12}  {:>6}  {:>16}  {:>8}",
+        "#", "f [Hz]", "sigma", "prominence [dB]", "damping"
     );
     for (i, p) in peaks.iter().enumerate() {
+        let z = p
+            .damping
+            .map(|z| format!("{z:.4}"))
+            .unwrap_or_else(|| "-".into());
         println!(
-            "{:>4}  {:>12.3}  {:>6}  {:>16.1}",
+            "{:>4}  {:>12.3}  {:>6}  {:>16.1}  {:>8}",
             i + 1,
             p.f_hz,
             p.sv_index + 1,
-            p.prominence
+            p.prominence,
+            z
         );
     }
     println!(
-        "{} peak(s); sigma is the 1-based singular value index",
+        "{} peak(s); sigma: 1-based singular value index; damping: half-power estimate from \
+         the enhanced FRF",
         peaks.len()
     );
     Ok(())
