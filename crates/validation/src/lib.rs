@@ -1,7 +1,60 @@
 //! # validation: residuals against the noise level, diagnosis evidence, model validation
 //!
-//! Will hold: residual statistics `E = G - P` per line and entry against the measured
-//! noise level with significance tests, the structure of a significant residual (its
-//! CMIF and peaks, phase and magnitude trends, concentration in a row or column) for the
-//! diagnosis loop of the `frfit` crate, and (a later issue) nonparametric disturbance
-//! bounds and mu-based model invalidation (Oomen-Bosgra).
+//! Holds the residual analysis of the residual-diagnosis loop (DESIGN.md, "The
+//! residual-diagnosis loop"; step 2 of the pipeline issue): the residual `E = G - P` per
+//! line and entry against the noise level, with a calibrated significance test, and the
+//! structure of a significant residual for the loop in the `frfit` crate to trace to an
+//! effect the model lacks. A later issue adds nonparametric disturbance bounds and
+//! mu-based model invalidation (Oomen-Bosgra).
+//!
+//! - [`noise`]: the noise level per line and entry: the data's `_var` columns, or an
+//!   estimate from the roughness of the data across neighbouring lines (say so in
+//!   reports: [`NoiseSource`]).
+//! - [`residual`]: [`analyze_residual`] (relative errors, residual-to-noise ratio per
+//!   line, the calibrated chi-square test, magnitude trend, row/column concentration,
+//!   and every signature below, ranked as [`EffectEvidence`]); [`relative_error_stats`]
+//!   for the loop's before/after table; [`Residual`], the reusable residual with its
+//!   calibrated null distribution.
+//! - [`signatures`]: one function per effect of the catalogue, each fitting the shape
+//!   the effect's omission leaves in the residual without refitting the model: a delay
+//!   ([`phase_trend`]), a zero-order hold ([`hold_signature`]), feedthrough, a stiffness
+//!   instead of a free rigid body, first-order actuator/sensor dynamics on one column or
+//!   row ([`io_factors`]), and missed modes (CMIF peaks of the whitened residual,
+//!   [`residual_peaks`]).
+//! - [`stats`]: chi-square and normal tails, robust location and scale, the
+//!   scaled-chi-square calibration.
+//!
+//! ```no_run
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! use frf_data::FrfDataset;
+//! let data = frf_data::io::read_frf_csv("wafer.csv")?;
+//! # let model_response: realize::ResponseGrid = todo!();
+//! let noise = validation::noise_level(&data)?;
+//! let cfg = validation::ResidualConfig { sample_rate_hz: Some(10e3), ..Default::default() };
+//! let a = validation::analyze_residual(&data, &model_response, &noise, &cfg)?;
+//! if a.significant {
+//!     for ev in a.evidence.iter().filter(|e| e.significant) {
+//!         println!("{:?}: {:.0} % of the excess; {}", ev.effect, 100.0 * ev.explained_fraction, ev.detail);
+//!     }
+//! }
+//! # Ok(()) }
+//! ```
+
+pub mod error;
+pub mod noise;
+pub mod residual;
+pub mod signatures;
+pub mod stats;
+
+pub use error::ValidationError;
+pub use noise::{estimate_noise, noise_level, NoiseConfig, NoiseLevel, NoiseSource};
+pub use residual::{
+    analyze_residual, concentration, magnitude_trend, relative_error_stats, Concentration, Effect,
+    EffectEvidence, MagnitudeTrend, Residual, ResidualAnalysis, ResidualConfig, Significance,
+    TrendClass,
+};
+pub use signatures::{
+    feedthrough_signature, hold_signature, io_factors, phase_trend, residual_peaks,
+    stiffness_signature, FeedthroughSignature, HoldSignature, IoFactor, PhaseTrend, ResidualPeak,
+    StiffnessSignature, TemplateFit,
+};

@@ -1,0 +1,840 @@
+//! The signatures of the effects in the diagnosis loop's catalogue (DESIGN.md, "The
+//! residual-diagnosis loop"): for each effect, the shape its omission leaves in the
+//! residual `E = G - P`, fitted to the residual **without refitting the model**, so that
+//! the loop can rank candidate effects before it spends a refit on one.
+//!
+//! | effect | residual when the model lacks it | template fitted here |
+//! |---|---|---|
+//! | delay `d` | `P (e^{-j w d} - 1) ~ -j w d P` | [`phase_trend`]: `d` by Gauss-Newton on the exact factor |
+//! | zero-order hold at `fs` | `P (sinc(w / 2 fs) - 1) ~ -(w T)^2 / 24 P`, real and relative | [`hold_signature`]: amplitude of `-(w T)^2 / 24` |
+//! | feedthrough `D` | `D`, constant over frequency | [`feedthrough_signature`]: a complex constant per entry |
+//! | stiffness instead of a free rigid body | `P_rb (s^2 / (s^2 + 2 zeta w0 s + w0^2) - 1)`, `~ (w0 / w)^2 P_rb` | [`stiffness_signature`]: gain per entry, common `w0`, `zeta` |
+//! | first-order actuator on input `j` | column `j`: `P_:j (1 / (1 + j w tau) - 1)` | [`io_factors`]: `tau` per column |
+//! | first-order sensor on output `i` | row `i`: `P_i: (1 / (1 + j w tau) - 1)` | [`io_factors`]: `tau` per row |
+//! | missed mode | a resonance `c b^T / (s^2 + 2 zeta w s + w^2)` | [`residual_peaks`]: CMIF peaks of the whitened residual |
+//!
+//! **Units and tests.** Every fit is a weighted least-squares fit with the inverse noise
+//! variances as weights, so its *explained energy* `Delta` (the decrease of
+//! `sum |E|^2 / var`) is in noise units. With the calibrated per-line scale `c` of the
+//! residual's significance test ([`crate::residual`]), `Delta / c ~ chi2(p)` for `p`
+//! fitted real parameters when the residual is noise; this gives the p-value. Because
+//! `N m` is large, any structured residual makes the p-value tiny, so a signature is
+//! **flagged** only when (1) the residual itself is significant, (2) the p-value is
+//! below `alpha` (Bonferroni-corrected over rows or columns where the best of several
+//! is taken) and (3) it explains at least [`crate::ResidualConfig::min_explained`] of
+//! the *excess* energy (above the calibrated noise), so that an effect that explains a
+//! sliver of another effect's residual is not flagged. Templates are evaluated on the
+//! model's response `P` (noise-free), so `E / P` stands for the relative residual
+//! `E / G` (equal to first order).
+
+use crate::residual::{localized_regions, region_excess_fraction, Residual};
+use crate::stats::{chi2_sf, median};
+use crate::ValidationError;
+use frf_data::cmif::{cmif, pick_peaks};
+use frf_data::{Frf, C64};
+use serde::{Deserialize, Serialize};
+use std::f64::consts::TAU;
+
+/// The least-squares fit of an effect's template to the residual, in noise units.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TemplateFit {
+    /// `Delta`: decrease of `sum |E|^2 / var` when the fitted template is subtracted.
+    pub explained: f64,
+    /// Number of real parameters fitted.
+    pub n_params: usize,
+    /// Upper-tail p-value of `Delta / c` under `chi2(n_params)` (times the number of
+    /// candidates when the best of several rows or columns is taken), at most 1.
+    pub p_value: f64,
+    /// `Delta` over the excess energy of the residual (energy above the calibrated
+    /// noise), clamped to `[0, 1]`; 0 when there is no excess.
+    pub explained_fraction: f64,
+    /// Flagged: residual significant, `p_value < alpha`, `explained_fraction >=
+    /// min_explained` (and any condition of the specific signature).
+    pub significant: bool,
+}
+
+impl TemplateFit {
+    fn new(res: &Residual, explained: f64, n_params: usize, n_candidates: usize) -> Self {
+        let (c, _) = res.line_null();
+        let explained = if explained.is_finite() {
+            explained.max(0.0)
+        } else {
+            0.0
+        };
+        let p_value =
+            (chi2_sf(explained / c, n_params.max(1) as f64) * n_candidates.max(1) as f64).min(1.0);
+        let excess = res.excess_energy();
+        let explained_fraction = if excess > 0.0 {
+            (explained / excess).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let cfg = res.config();
+        let significant = res.significance().significant
+            && p_value < cfg.alpha
+            && explained_fraction >= cfg.min_explained;
+        Self {
+            explained,
+            n_params,
+            p_value,
+            explained_fraction,
+            significant,
+        }
+    }
+}
+
+/// Per-line sums over a subset of entries: `A_k = sum_e |P|^2 / var`,
+/// `B_k = sum_e conj(P) E / var` (a per-line factor `g_k` in `E ~ g_k P` then has the
+/// weighted least-squares gain `2 Re(conj(g) B) - |g|^2 A`).
+fn line_sums(res: &Residual, entries: impl Fn(usize) -> bool) -> (Vec<f64>, Vec<C64>) {
+    let n = res.n_lines();
+    let m = res.ny * res.nu;
+    let sel: Vec<usize> = (0..m).filter(|e| entries(*e)).collect();
+    let mut a = vec![0.0; n];
+    let mut b = vec![C64::new(0.0, 0.0); n];
+    for k in 0..n {
+        let (mut ak, mut bk) = (0.0, C64::new(0.0, 0.0));
+        for &e in &sel {
+            let i = k * m + e;
+            let p = res.model[i];
+            let w = res.weight[i];
+            ak += w * p.norm_sqr();
+            bk += p.conj() * res.error[i] * w;
+        }
+        a[k] = ak;
+        b[k] = bk;
+    }
+    (a, b)
+}
+
+/// A per-line factor `g(w; theta)` of the model: `E ~ g P`.
+#[derive(Clone, Copy)]
+enum Factor {
+    /// `e^{-j w theta} - 1` (a delay `theta`).
+    Delay,
+    /// `1 / (1 + j w theta) - 1` (a first-order lag with time constant `theta`).
+    FirstOrder,
+}
+
+impl Factor {
+    fn g(self, w: f64, theta: f64) -> (C64, C64) {
+        match self {
+            Factor::Delay => {
+                let ph = C64::from_polar(1.0, -w * theta);
+                (ph - 1.0, C64::new(0.0, -w) * ph)
+            }
+            Factor::FirstOrder => {
+                let d = C64::new(1.0, w * theta);
+                let inv = d.inv();
+                (inv - 1.0, C64::new(0.0, -w) * inv * inv)
+            }
+        }
+    }
+}
+
+/// Result of [`fit_factor`]: `(theta, std, explained, linear theta)`.
+struct FactorFit {
+    theta: f64,
+    std: f64,
+    explained: f64,
+    linear: f64,
+}
+
+/// Fits `theta` of a per-line factor to the per-line sums by Gauss-Newton from the
+/// small-`theta` (linear, `g ~ -j w theta`) estimate, with step halving so that the
+/// explained energy never decreases. `std = sqrt(c / sum |g'|^2 A)`.
+fn fit_factor(omega: &[f64], a: &[f64], b: &[C64], kind: Factor, c: f64) -> FactorFit {
+    let gain = |theta: f64| -> f64 {
+        omega
+            .iter()
+            .zip(a.iter().zip(b))
+            .map(|(&w, (&ak, bk))| {
+                let (g, _) = kind.g(w, theta);
+                2.0 * (g.conj() * bk).re - g.norm_sqr() * ak
+            })
+            .sum()
+    };
+    // Linear start: Re sum conj(-j w) B / sum w^2 A = -sum w Im B / sum w^2 A.
+    let (mut num, mut den) = (0.0, 0.0);
+    for (&w, (&ak, bk)) in omega.iter().zip(a.iter().zip(b)) {
+        num -= w * bk.im;
+        den += w * w * ak;
+    }
+    if !(den > 0.0 && den.is_finite() && num.is_finite()) {
+        return FactorFit {
+            theta: 0.0,
+            std: f64::INFINITY,
+            explained: 0.0,
+            linear: 0.0,
+        };
+    }
+    let linear = num / den;
+    let mut theta = linear;
+    let mut best = gain(theta);
+    for _ in 0..30 {
+        let (mut gr, mut h) = (0.0, 0.0);
+        for (&w, (&ak, bk)) in omega.iter().zip(a.iter().zip(b)) {
+            let (g, dg) = kind.g(w, theta);
+            gr += (dg.conj() * (bk - g * ak)).re;
+            h += dg.norm_sqr() * ak;
+        }
+        if !(h > 0.0) {
+            break;
+        }
+        // Stop once the step is far below the statistical uncertainty sqrt(c / h).
+        let tol = 1e-4 * (c / h).sqrt();
+        let mut step = gr / h;
+        let mut improved = false;
+        for _ in 0..40 {
+            let t = theta + step;
+            let v = gain(t);
+            if v.is_finite() && v >= best {
+                theta = t;
+                best = v;
+                improved = true;
+                break;
+            }
+            step *= 0.5;
+        }
+        if !improved || step.abs() <= tol {
+            break;
+        }
+    }
+    let h: f64 = omega
+        .iter()
+        .zip(a)
+        .map(|(&w, &ak)| kind.g(w, theta).1.norm_sqr() * ak)
+        .sum();
+    FactorFit {
+        theta,
+        std: if h > 0.0 {
+            (c / h).sqrt()
+        } else {
+            f64::INFINITY
+        },
+        explained: best.max(0.0),
+        linear,
+    }
+}
+
+/// The delay signature: the phase trend of the residual.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PhaseTrend {
+    /// The delay `d` (seconds) that the model lacks: `G ~ P e^{-j w d}`. Positive: the
+    /// data lag the model (an uncompensated delay); negative: the model has too much
+    /// delay (over-compensation).
+    pub delay_s: f64,
+    /// Standard error of `delay_s` (calibrated noise scale), seconds.
+    pub std_s: f64,
+    /// `delay_s / std_s`.
+    pub z: f64,
+    /// The small-delay (linear least-squares) estimate from `E ~ -j w d P`, the start of
+    /// the Gauss-Newton refinement on the exact factor; biased low when `w d` reaches
+    /// ~0.5 rad in the band.
+    pub linear_delay_s: f64,
+    /// The fit (1 parameter).
+    pub fit: TemplateFit,
+}
+
+/// The phase trend of the residual: the delay `d` in `E = P (e^{-j w d} - 1)`, by
+/// weighted least squares (weights `1 / var`), first linearised (`E ~ -j w d P`, i.e.
+/// the least-squares slope of `Im(E / P)` against `-w` weighted by `|P|^2 / var`),
+/// then refined by Gauss-Newton on the exact factor. The model's response `P` is the
+/// regressor (noise-free). Flagged as described in the module documentation; its sign
+/// says whether the model lacks delay (positive) or has too much (negative).
+pub fn phase_trend(res: &Residual) -> PhaseTrend {
+    let (a, b) = line_sums(res, |_| true);
+    let (c, _) = res.line_null();
+    let f = fit_factor(&res.omega, &a, &b, Factor::Delay, c);
+    let fit = TemplateFit::new(res, f.explained, 1, 1);
+    PhaseTrend {
+        delay_s: f.theta,
+        std_s: f.std,
+        z: if f.std > 0.0 { f.theta / f.std } else { 0.0 },
+        linear_delay_s: f.linear,
+        fit,
+    }
+}
+
+/// The zero-order-hold signature at a given sample rate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HoldSignature {
+    /// The sample rate tested, Hz.
+    pub fs_hz: f64,
+    /// Fitted amplitude `a` of the template `h(w) = -(w T)^2 / 24`, `T = 1 / fs`: 1 when
+    /// the model lacks exactly the droop of a hold at `fs` (about 1.1 at a fifth of
+    /// `fs` for a rigid-body-dominated plant, where the hold's aliasing adds to the
+    /// droop).
+    pub amplitude: f64,
+    /// Standard error of `amplitude`.
+    pub amplitude_std: f64,
+    /// Weighted correlation (cosine, not centred) of `Re(E / P)` with `h(w)`, weights
+    /// `|P|^2 / var`: 1 when the real relative residual has exactly the shape of the
+    /// droop.
+    pub correlation: f64,
+    /// Share of the relative residual's energy in `Im(E / P)` (weights as above). A
+    /// hold whose half-sample delay has been compensated leaves almost none; a delay
+    /// leaves almost all.
+    pub imag_fraction: f64,
+    /// The sample rate the fitted droop corresponds to, `fs / sqrt(a)` (`None` for
+    /// `a <= 0`).
+    pub apparent_fs_hz: Option<f64>,
+    /// The fit (1 parameter).
+    pub fit: TemplateFit,
+    /// Flagged and consistent with a hold at `fs`: `fit.significant`, correlation at
+    /// least 0.9 and amplitude within `[0.5, 2]`.
+    pub consistent: bool,
+}
+
+/// Tests the residual for an unmodelled zero-order hold at the sample rate `fs_hz`
+/// without refitting: the residual of a hold the model lacks is
+/// `E / P = sinc(w T / 2) - 1 ~ -(w T)^2 / 24` (real and relative; near Nyquist the
+/// aliasing of the sampled plant adds to it), so this returns the correlation of
+/// `Re(E / P)` with `-(w T)^2 / 24` and the fitted amplitude (1 for a hold at exactly
+/// `fs`), with the explained energy and its test. A non-positive or non-finite
+/// `fs_hz` gives an unflagged signature with NaN amplitude.
+pub fn hold_signature(res: &Residual, fs_hz: f64) -> HoldSignature {
+    let n = res.n_lines();
+    let m = res.ny * res.nu;
+    let (c, _) = res.line_null();
+    if !(fs_hz.is_finite() && fs_hz > 0.0) {
+        return HoldSignature {
+            fs_hz,
+            amplitude: f64::NAN,
+            amplitude_std: f64::NAN,
+            correlation: 0.0,
+            imag_fraction: f64::NAN,
+            apparent_fs_hz: None,
+            fit: TemplateFit::new(res, 0.0, 1, 1),
+            consistent: false,
+        };
+    }
+    let t = 1.0 / fs_hz;
+    let (mut shb, mut shha, mut sr, mut si) = (0.0, 0.0, 0.0, 0.0);
+    for k in 0..n {
+        let wt = res.omega[k] * t;
+        let h = -wt * wt / 24.0;
+        for e in 0..m {
+            let i = k * m + e;
+            let p = res.model[i];
+            let p2 = p.norm_sqr();
+            if p2 <= 0.0 {
+                continue;
+            }
+            let w = res.weight[i];
+            let x = p.conj() * res.error[i]; // |P|^2 E / P
+            shb += w * h * x.re;
+            shha += w * h * h * p2;
+            sr += w * x.re * x.re / p2;
+            si += w * x.im * x.im / p2;
+        }
+    }
+    let (amplitude, explained, std) = if shha > 0.0 {
+        (shb / shha, shb * shb / shha, (c / shha).sqrt())
+    } else {
+        (f64::NAN, 0.0, f64::INFINITY)
+    };
+    let correlation = if shha > 0.0 && sr > 0.0 {
+        shb / (shha * sr).sqrt()
+    } else {
+        0.0
+    };
+    let fit = TemplateFit::new(res, explained, 1, 1);
+    let consistent = fit.significant && correlation >= 0.9 && (0.5..=2.0).contains(&amplitude);
+    HoldSignature {
+        fs_hz,
+        amplitude,
+        amplitude_std: std,
+        correlation,
+        imag_fraction: if sr + si > 0.0 {
+            si / (sr + si)
+        } else {
+            f64::NAN
+        },
+        apparent_fs_hz: (amplitude > 0.0).then(|| fs_hz / amplitude.sqrt()),
+        fit,
+        consistent,
+    }
+}
+
+/// The constant-feedthrough signature.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FeedthroughSignature {
+    /// The fitted constant per entry, `vec` order (`d[j * ny + i]` for output `i`, input
+    /// `j`).
+    pub d: Vec<C64>,
+    /// `sqrt(mean |d|^2)`.
+    pub rms_magnitude: f64,
+    /// `sum (Re d)^2 / sum |d|^2`: 1 for a real feedthrough (a phase rotation means a
+    /// delay acts on the feedthrough differently from the model, e.g. half a sample
+    /// after a hold's delay is compensated).
+    pub real_fraction: f64,
+    /// The fit (`2 ny nu` parameters).
+    pub fit: TemplateFit,
+}
+
+/// Tests the residual for a constant (feedthrough / crosstalk) term: `E_ke ~ D_e`, a
+/// complex constant per entry fitted by weighted least squares
+/// (`D_e = sum_k E_ke / var_ke / sum_k 1 / var_ke`). A constant matters where the plant
+/// has rolled off, so it shows at high frequencies in noise units.
+pub fn feedthrough_signature(res: &Residual) -> FeedthroughSignature {
+    let (n, m) = (res.n_lines(), res.ny * res.nu);
+    let mut sw = vec![0.0; m];
+    let mut se = vec![C64::new(0.0, 0.0); m];
+    for k in 0..n {
+        for e in 0..m {
+            let i = k * m + e;
+            sw[e] += res.weight[i];
+            se[e] += res.error[i] * res.weight[i];
+        }
+    }
+    let mut d = vec![C64::new(0.0, 0.0); m];
+    let mut explained = 0.0;
+    for e in 0..m {
+        if sw[e] > 0.0 {
+            d[e] = se[e] / sw[e];
+            explained += se[e].norm_sqr() / sw[e];
+        }
+    }
+    let s2: f64 = d.iter().map(|z| z.norm_sqr()).sum();
+    let r2: f64 = d.iter().map(|z| z.re * z.re).sum();
+    FeedthroughSignature {
+        rms_magnitude: (s2 / m as f64).sqrt(),
+        real_fraction: if s2 > 0.0 { r2 / s2 } else { 0.0 },
+        d,
+        fit: TemplateFit::new(res, explained, 2 * m, 1),
+    }
+}
+
+/// The signature of a stiffness (suspension) in place of a free rigid body.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StiffnessSignature {
+    /// Fitted suspension frequency, Hz. Identified only when the band reaches down to
+    /// about `2 f_hz`; below that the residual is `~ (w0 / w)^2 P` and only
+    /// `gain * f_hz^2` is determined (see `equivalent_f_hz`).
+    pub f_hz: f64,
+    /// Fitted suspension damping.
+    pub zeta: f64,
+    /// Fitted gain per entry (`vec` order): the share of the entry's response that is
+    /// the suspended body (1 where the rigid body dominates the low frequencies).
+    pub gains: Vec<f64>,
+    /// `f_hz * sqrt(g)`, `g` the weighted mean gain: the suspension frequency if the
+    /// rigid body carried the whole low-frequency response (robust when `f_hz` is below
+    /// the band).
+    pub equivalent_f_hz: f64,
+    /// The fit (`ny nu + 2` parameters).
+    pub fit: TemplateFit,
+}
+
+/// Tests the residual for a stiffness replacing a free rigid body. Replacing `R / s^2`
+/// by `R / (s^2 + 2 zeta w0 s + w0^2)` changes the response by
+/// `P_rb q(s)`, `q = -(2 zeta w0 s + w0^2) / (s^2 + 2 zeta w0 s + w0^2)`
+/// (`~ (w0 / w)^2` above `w0`, `-1` below): a low-frequency, in-phase relative
+/// residual. The template is `E_ke ~ g_e q(j w_k) P_ke` with a real gain `g_e` per entry
+/// (the rigid body's share of the entry's low-frequency response), and `w0`, `zeta`
+/// common: `w0` on a logarithmic grid (8 per decade, from a tenth of the lowest line to
+/// a tenth of the highest but at most 100 times the lowest: a stiffness sits at the
+/// bottom of the band) at `zeta = 0.05`, then golden-section refinement of `f0` and of
+/// `zeta` in `[1e-3, 1]`. Lines above `100 w0` (where `|q| < 1e-4`) are skipped.
+pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
+    let (n, m) = (res.n_lines(), res.ny * res.nu);
+    // x = conj(P) E / var, y = |P|^2 / var.
+    let mut x = vec![C64::new(0.0, 0.0); n * m];
+    let mut y = vec![0.0; n * m];
+    for i in 0..n * m {
+        let p = res.model[i];
+        x[i] = p.conj() * res.error[i] * res.weight[i];
+        y[i] = p.norm_sqr() * res.weight[i];
+    }
+    let omega = &res.omega;
+    let mut num = vec![0.0; m];
+    let mut den = vec![0.0; m];
+    let mut eval = |f0: f64, zeta: f64, gains: Option<&mut Vec<f64>>| -> f64 {
+        let w0 = TAU * f0;
+        let kmax = omega.partition_point(|w| *w < 100.0 * w0);
+        num.iter_mut().for_each(|v| *v = 0.0);
+        den.iter_mut().for_each(|v| *v = 0.0);
+        for k in 0..kmax {
+            let s = C64::new(0.0, omega[k]);
+            let a = C64::new(w0 * w0, 0.0) + s * (2.0 * zeta * w0);
+            let q = -a / (s * s + a);
+            let qc = q.conj();
+            let q2 = q.norm_sqr();
+            let xs = &x[k * m..(k + 1) * m];
+            let ys = &y[k * m..(k + 1) * m];
+            for e in 0..m {
+                num[e] += (qc * xs[e]).re;
+                den[e] += q2 * ys[e];
+            }
+        }
+        let mut total = 0.0;
+        for e in 0..m {
+            if den[e] > 0.0 {
+                total += num[e] * num[e] / den[e];
+            }
+        }
+        if let Some(g) = gains {
+            g.clear();
+            g.extend((0..m).map(|e| if den[e] > 0.0 { num[e] / den[e] } else { 0.0 }));
+        }
+        total
+    };
+    let fpos: Vec<f64> = res.freq_hz.iter().copied().filter(|f| *f > 0.0).collect();
+    let (flo, fhi) = match (fpos.first(), fpos.last()) {
+        (Some(a), Some(b)) => (a / 10.0, (b / 10.0).min(100.0 * a).max(a / 5.0)),
+        _ => {
+            return StiffnessSignature {
+                f_hz: f64::NAN,
+                zeta: f64::NAN,
+                gains: vec![0.0; m],
+                equivalent_f_hz: f64::NAN,
+                fit: TemplateFit::new(res, 0.0, m + 2, 1),
+            }
+        }
+    };
+    let step = 10f64.powf(1.0 / 8.0);
+    let mut best = (f64::NEG_INFINITY, flo);
+    let mut f0 = flo;
+    while f0 <= fhi * 1.000_001 {
+        let v = eval(f0, 0.05, None);
+        if v > best.0 {
+            best = (v, f0);
+        }
+        f0 *= step;
+    }
+    let mut zeta = 0.05;
+    let lf = golden_max(
+        |lf| eval(10f64.powf(lf), zeta, None),
+        (best.1 / step).log10(),
+        (best.1 * step).log10(),
+        24,
+    );
+    let f_hz = 10f64.powf(lf);
+    let lz = golden_max(|lz| eval(f_hz, 10f64.powf(lz), None), -3.0, 0.0, 20);
+    let cand = 10f64.powf(lz);
+    if eval(f_hz, cand, None) > eval(f_hz, zeta, None) {
+        zeta = cand;
+    }
+    let mut gains = Vec::with_capacity(m);
+    let explained = eval(f_hz, zeta, Some(&mut gains));
+    let (mut gw, mut sw) = (0.0, 0.0);
+    for e in 0..m {
+        gw += gains[e] * den[e];
+        sw += den[e];
+    }
+    let gbar = if sw > 0.0 { gw / sw } else { 0.0 };
+    StiffnessSignature {
+        f_hz,
+        zeta,
+        equivalent_f_hz: if gbar > 0.0 {
+            f_hz * gbar.sqrt()
+        } else {
+            f64::NAN
+        },
+        gains,
+        fit: TemplateFit::new(res, explained, m + 2, 1),
+    }
+}
+
+/// Golden-section search for the maximum of `f` on `[a, b]`.
+fn golden_max(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, iters: usize) -> f64 {
+    let r = 0.5 * (5f64.sqrt() - 1.0);
+    let mut c = b - r * (b - a);
+    let mut d = a + r * (b - a);
+    let (mut fc, mut fd) = (f(c), f(d));
+    for _ in 0..iters {
+        if fc >= fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - r * (b - a);
+            fc = f(c);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + r * (b - a);
+            fd = f(d);
+        }
+    }
+    if fc >= fd {
+        c
+    } else {
+        d
+    }
+}
+
+/// The signature of a first-order factor common to one input column (actuator
+/// dynamics) or one output row (sensor dynamics).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IoFactor {
+    /// The column (input) or row (output), 0-based.
+    pub index: usize,
+    /// Its share of the residual's excess energy (from [`crate::Concentration`]).
+    pub energy_fraction: f64,
+    /// Time constant `tau` of the factor `1 / (1 + j w tau)`, seconds; negative for a
+    /// lead (or when the model has too much lag).
+    pub tau_s: f64,
+    /// Standard error of `tau_s`.
+    pub tau_std_s: f64,
+    /// `1 / (2 pi |tau|)`, Hz.
+    pub pole_hz: f64,
+    /// The fit (1 parameter; p-value Bonferroni-corrected over the rows or columns).
+    /// Flagged only for the dominant row or column of [`crate::Concentration`].
+    pub fit: TemplateFit,
+}
+
+/// Tests every input column and every output row for a first-order factor the model
+/// lacks: for column `j`, `E_:j = P_:j (1 / (1 + j w tau) - 1)` (an actuator's
+/// bandwidth), for row `i` the same with `P_i:` (a sensor's). `tau` is fitted by
+/// Gauss-Newton on the exact factor from the small-`tau` estimate (a factor
+/// `~ 1 - j w tau` at low frequency, a delay on that column alone). A factor common to
+/// all columns (a delay) explains about `1 / nu` of the excess in each column, so a
+/// column is flagged only when it is the dominant column of `conc` and its factor
+/// explains `min_explained` of the **total** excess. Returns (columns, rows).
+pub fn io_factors(
+    res: &Residual,
+    conc: &crate::residual::Concentration,
+) -> (Vec<IoFactor>, Vec<IoFactor>) {
+    let (ny, nu) = (res.ny, res.nu);
+    let (c, _) = res.line_null();
+    let one = |index: usize, col: bool| -> IoFactor {
+        let (a, b) = if col {
+            line_sums(res, |e| e / ny == index)
+        } else {
+            line_sums(res, |e| e % ny == index)
+        };
+        let f = fit_factor(&res.omega, &a, &b, Factor::FirstOrder, c);
+        let n_cand = if col { nu } else { ny };
+        let mut fit = TemplateFit::new(res, f.explained, 1, n_cand);
+        let dominant = if col {
+            conc.dominant_col == Some(index)
+        } else {
+            conc.dominant_row == Some(index)
+        };
+        fit.significant &= dominant;
+        IoFactor {
+            index,
+            energy_fraction: if col {
+                conc.col_fraction[index]
+            } else {
+                conc.row_fraction[index]
+            },
+            tau_s: f.theta,
+            tau_std_s: f.std,
+            pole_hz: if f.theta != 0.0 {
+                1.0 / (TAU * f.theta.abs())
+            } else {
+                f64::INFINITY
+            },
+            fit,
+        }
+    };
+    (
+        (0..nu).map(|j| one(j, true)).collect(),
+        (0..ny).map(|i| one(i, false)).collect(),
+    )
+}
+
+/// A peak of the CMIF of the noise-whitened residual: where the model may miss a mode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ResidualPeak {
+    /// Peak frequency, Hz (the CMIF picker's enhanced-FRF maximum, parabola-refined).
+    pub f_hz: f64,
+    /// The line of the peak.
+    pub line: usize,
+    /// Singular value index, 0-based (0 = the largest).
+    pub sv_index: usize,
+    /// `sigma_i^2` of the residual at the peak over the calibrated noise energy of the
+    /// whole line (`kappa sum_e var_e`): a power ratio, above 1 when this one singular
+    /// direction holds more than all the noise of the line (pure noise gives about
+    /// 0.3-0.6 for `sigma_1` of a 4 x 13 matrix).
+    pub height_over_noise: f64,
+    /// The picker's prominence, dB (`None` for a localized excess the picker did not
+    /// return as a peak).
+    pub prominence_db: Option<f64>,
+    /// Half-power damping estimate of the picker, when resolved.
+    pub damping: Option<f64>,
+    /// The line statistic at the peak over the calibrated noise mean (`s_k / (c nu)`).
+    pub line_ratio: f64,
+    /// Share of the residual's excess energy in the localized region around the peak.
+    pub excess_fraction: f64,
+    /// The relative residual `rho_k = sum_e |E|^2 / var / sum_e |P|^2 / var` at the
+    /// peak over its median in the analysis window: a missed mode is a resonance of `E`
+    /// that `P` does not share, so `rho` peaks (rise >> 1); the residual of a smooth
+    /// factor the model lacks (a delay, a hold, actuator dynamics) peaks at the model's
+    /// own resonances with `rho` smooth (rise ~ 1).
+    pub relative_rise: f64,
+    /// The residual is significant, the peak lies in a region of the localized test of
+    /// [`crate::residual`], and its `relative_rise` reaches
+    /// [`crate::ResidualConfig::peak_over_local`]: a missed-mode candidate.
+    pub significant: bool,
+    /// False for a localized excess that the CMIF picker did not return as a peak
+    /// (reported at its highest line).
+    pub from_picker: bool,
+}
+
+/// The peaks of the CMIF (`frf_data::cmif`) of the residual `E` where the residual has
+/// localized excess (the regions of the localized test of [`crate::residual`]), highest
+/// first, at most [`crate::ResidualConfig::max_peaks`].
+///
+/// A missed mode `c b^T / (s^2 + 2 zeta w s + w^2)` is rank one: it raises one singular
+/// value of `E` at its damped natural frequency, with singular vectors along its mode
+/// shapes. The CMIF is taken of `E` itself (not of the noise-whitened residual, whose
+/// peak the frequency dependence of the noise variance would shift: by 1-2 % on the
+/// reference data) with the calibrated noise variance (`kappa var`), so that the
+/// picker measures prominences against the noise; each localized region is analysed
+/// with `+-max(local_rel, 6 %)` of frequency around it (the picker's windows need
+/// +-5 %). The height over the noise is in noise units and does not depend on that
+/// choice. A region the picker returns no peak for is reported at its highest line
+/// (`from_picker = false`). Peaks are computed only where the localized test fires,
+/// which also keeps the cost small (the picker on the whole band of pure noise
+/// examines thousands of candidates).
+///
+/// Errors: the CMIF fails (a non-converging SVD).
+pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationError> {
+    let (n, ny, nu) = (res.n_lines(), res.ny, res.nu);
+    let m = ny * nu;
+    let regions = localized_regions(res);
+    if regions.is_empty() {
+        return Ok(Vec::new());
+    }
+    let kappa = res.entry_noise_energy().max(f64::MIN_POSITIVE);
+    let mu = res.null.mean().max(f64::MIN_POSITIVE);
+    let sig = res.significance().significant;
+    let f = &res.freq_hz;
+    let ext = res.cfg.local_rel.max(0.06);
+    let h = res.cfg.local_half_window;
+    // Analysis windows around the regions, merged.
+    let mut windows: Vec<std::ops::Range<usize>> = Vec::new();
+    for rg in &regions {
+        let a = f
+            .partition_point(|x| *x < f[rg.start] * (1.0 - ext))
+            .min(rg.start.saturating_sub(h));
+        let b = f
+            .partition_point(|x| *x <= f[rg.end - 1] * (1.0 + ext))
+            .max((rg.end + h).min(n));
+        match windows.last_mut() {
+            Some(w) if a <= w.end => w.end = w.end.max(b),
+            _ => windows.push(a..b),
+        }
+    }
+    let in_region = |k: usize| {
+        regions
+            .iter()
+            .find(|rg| rg.start <= k + 2 && k < rg.end + 2)
+    };
+    let line_noise = |k: usize| -> f64 {
+        kappa
+            * res.weight[k * m..(k + 1) * m]
+                .iter()
+                .map(|w| 1.0 / w)
+                .sum::<f64>()
+    };
+    // Relative residual per line.
+    let rho: Vec<f64> = (0..n)
+        .map(|k| {
+            let (mut ee, mut pp) = (0.0, 0.0);
+            for i in k * m..(k + 1) * m {
+                ee += res.error[i].norm_sqr() * res.weight[i];
+                pp += res.model[i].norm_sqr() * res.weight[i];
+            }
+            if pp > 0.0 {
+                ee / pp
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect();
+    let rise = |k: usize, w: &std::ops::Range<usize>| -> f64 {
+        let med = median(&rho[w.clone()]);
+        if med > 0.0 {
+            rho[k] / med
+        } else {
+            f64::INFINITY
+        }
+    };
+    let thr = res.cfg.peak_over_local;
+    let mut out: Vec<ResidualPeak> = Vec::new();
+    for w in &windows {
+        let frf = Frf::new(
+            f[w.clone()].to_vec(),
+            ny,
+            nu,
+            res.error[w.start * m..w.end * m].to_vec(),
+            Some(
+                res.weight[w.start * m..w.end * m]
+                    .iter()
+                    .map(|x| kappa / x)
+                    .collect(),
+            ),
+        )?;
+        let cm = cmif(&frf)?;
+        for p in pick_peaks(&cm, &res.cfg.peak) {
+            if p.line >= cm.n_lines() || p.sv_index >= cm.n_sv() {
+                continue;
+            }
+            let k = w.start + p.line;
+            let Some(rg) = in_region(k) else { continue };
+            let relative_rise = rise(k, w);
+            out.push(ResidualPeak {
+                f_hz: p.f_hz,
+                line: k,
+                sv_index: p.sv_index,
+                height_over_noise: cm.sv2[p.line][p.sv_index] / line_noise(k),
+                prominence_db: Some(p.prominence),
+                damping: p.damping,
+                line_ratio: res.line_stat[k] / mu,
+                excess_fraction: region_excess_fraction(res, rg.clone()),
+                relative_rise,
+                significant: sig && relative_rise >= thr,
+                from_picker: true,
+            });
+        }
+    }
+    // Localized regions without a picked peak.
+    for rg in &regions {
+        if out
+            .iter()
+            .any(|p| rg.start <= p.line + 2 && p.line < rg.end + 2)
+        {
+            continue;
+        }
+        let k = (rg.start..rg.end)
+            .max_by(|a, b| res.line_stat[*a].total_cmp(&res.line_stat[*b]))
+            .unwrap_or(rg.start);
+        let sv1 = {
+            let g = faer::MatRef::from_column_major_slice(&res.error[k * m..(k + 1) * m], ny, nu);
+            g.singular_values()
+                .ok()
+                .and_then(|v| v.first().copied())
+                .unwrap_or(0.0)
+        };
+        let w = windows
+            .iter()
+            .find(|w| w.start <= k && k < w.end)
+            .cloned()
+            .unwrap_or(rg.clone());
+        let relative_rise = rise(k, &w);
+        out.push(ResidualPeak {
+            f_hz: f[k],
+            line: k,
+            sv_index: 0,
+            height_over_noise: sv1 * sv1 / line_noise(k),
+            prominence_db: None,
+            damping: None,
+            line_ratio: res.line_stat[k] / mu,
+            excess_fraction: region_excess_fraction(res, rg.clone()),
+            relative_rise,
+            significant: sig && relative_rise >= thr,
+            from_picker: false,
+        });
+    }
+    out.sort_by(|a, b| {
+        b.significant
+            .cmp(&a.significant)
+            .then(b.height_over_noise.total_cmp(&a.height_over_noise))
+    });
+    out.truncate(res.cfg.max_peaks);
+    Ok(out)
+}
