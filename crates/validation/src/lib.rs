@@ -43,6 +43,7 @@
 pub mod error;
 pub mod noise;
 pub mod residual;
+mod serde_f64;
 pub mod signatures;
 pub mod stats;
 
@@ -54,7 +55,7 @@ pub use residual::{
     TrendClass,
 };
 pub use signatures::{
-    feedthrough_signature, hold_signature, io_factors, phase_trend, residual_peaks,
+    feedthrough_signature, hold_signature, io_factors, mode_signature, phase_trend, residual_peaks,
     stiffness_signature, FeedthroughSignature, HoldSignature, IoFactor, PhaseTrend, ResidualPeak,
     StiffnessSignature, TemplateFit,
 };
