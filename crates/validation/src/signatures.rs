@@ -27,7 +27,7 @@
 //! model's response `P` (noise-free), so `E / P` stands for the relative residual
 //! `E / G` (equal to first order).
 
-use crate::residual::{localized_regions, region_excess_fraction, Residual};
+use crate::residual::{is_relative_peak, localized_regions, region_excess_fraction, Residual};
 use crate::stats::chi2_sf;
 use crate::ValidationError;
 use frf_data::cmif::{cmif, pick_peaks};
@@ -142,17 +142,19 @@ struct FactorFit {
 
 /// Fits `theta` of a per-line factor to the per-line sums by Gauss-Newton from the
 /// small-`theta` (linear, `g ~ -j w theta`) estimate, with step halving so that the
-/// explained energy never decreases. `std = sqrt(c / sum |g'|^2 A)`.
+/// explained energy never decreases; stops when the step is below 1e-4 of the
+/// statistical uncertainty. `std = sqrt(c / sum |g'|^2 A)`.
 fn fit_factor(omega: &[f64], a: &[f64], b: &[C64], kind: Factor, c: f64) -> FactorFit {
-    let gain = |theta: f64| -> f64 {
-        omega
-            .iter()
-            .zip(a.iter().zip(b))
-            .map(|(&w, (&ak, bk))| {
-                let (g, _) = kind.g(w, theta);
-                2.0 * (g.conj() * bk).re - g.norm_sqr() * ak
-            })
-            .sum()
+    // Explained energy, gradient and Gauss-Newton curvature at theta, in one pass.
+    let eval = |theta: f64| -> (f64, f64, f64) {
+        let (mut v, mut gr, mut h) = (0.0, 0.0, 0.0);
+        for (&w, (&ak, bk)) in omega.iter().zip(a.iter().zip(b)) {
+            let (g, dg) = kind.g(w, theta);
+            v += 2.0 * (g.conj() * bk).re - g.norm_sqr() * ak;
+            gr += (dg.conj() * (bk - g * ak)).re;
+            h += dg.norm_sqr() * ak;
+        }
+        (v, gr, h)
     };
     // Linear start: Re sum conj(-j w) B / sum w^2 A = -sum w Im B / sum w^2 A.
     let (mut num, mut den) = (0.0, 0.0);
@@ -170,41 +172,31 @@ fn fit_factor(omega: &[f64], a: &[f64], b: &[C64], kind: Factor, c: f64) -> Fact
     }
     let linear = num / den;
     let mut theta = linear;
-    let mut best = gain(theta);
+    let (mut best, mut gr, mut h) = eval(theta);
     for _ in 0..30 {
-        let (mut gr, mut h) = (0.0, 0.0);
-        for (&w, (&ak, bk)) in omega.iter().zip(a.iter().zip(b)) {
-            let (g, dg) = kind.g(w, theta);
-            gr += (dg.conj() * (bk - g * ak)).re;
-            h += dg.norm_sqr() * ak;
-        }
-        if !(h > 0.0) {
+        if !(h > 0.0 && h.is_finite()) {
             break;
         }
-        // Stop once the step is far below the statistical uncertainty sqrt(c / h).
         let tol = 1e-4 * (c / h).sqrt();
         let mut step = gr / h;
-        let mut improved = false;
+        let mut moved = false;
         for _ in 0..40 {
-            let t = theta + step;
-            let v = gain(t);
+            let (v, g2, h2) = eval(theta + step);
             if v.is_finite() && v >= best {
-                theta = t;
-                best = v;
-                improved = true;
+                theta += step;
+                (best, gr, h) = (v, g2, h2);
+                moved = true;
                 break;
             }
             step *= 0.5;
+            if step.abs() <= tol {
+                break;
+            }
         }
-        if !improved || step.abs() <= tol {
+        if !moved || step.abs() <= tol {
             break;
         }
     }
-    let h: f64 = omega
-        .iter()
-        .zip(a)
-        .map(|(&w, &ak)| kind.g(w, theta).1.norm_sqr() * ak)
-        .sum();
     FactorFit {
         theta,
         std: if h > 0.0 {
@@ -446,12 +438,16 @@ pub struct StiffnessSignature {
 /// `zeta` in `[1e-3, 1]`. Lines above `100 w0` (where `|q| < 1e-4`) are skipped.
 pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
     let (n, m) = (res.n_lines(), res.ny * res.nu);
-    // x = conj(P) E / var, y = |P|^2 / var.
-    let mut x = vec![C64::new(0.0, 0.0); n * m];
+    // x = conj(P) E / var (real and imaginary parts apart, so that the inner loop
+    // vectorises), y = |P|^2 / var.
+    let mut xr = vec![0.0; n * m];
+    let mut xi = vec![0.0; n * m];
     let mut y = vec![0.0; n * m];
     for i in 0..n * m {
         let p = res.model[i];
-        x[i] = p.conj() * res.error[i] * res.weight[i];
+        let x = p.conj() * res.error[i] * res.weight[i];
+        xr[i] = x.re;
+        xi[i] = x.im;
         y[i] = p.norm_sqr() * res.weight[i];
     }
     let omega = &res.omega;
@@ -466,13 +462,18 @@ pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
             let s = C64::new(0.0, omega[k]);
             let a = C64::new(w0 * w0, 0.0) + s * (2.0 * zeta * w0);
             let q = -a / (s * s + a);
-            let qc = q.conj();
             let q2 = q.norm_sqr();
-            let xs = &x[k * m..(k + 1) * m];
+            let (xrs, xis) = (&xr[k * m..(k + 1) * m], &xi[k * m..(k + 1) * m]);
             let ys = &y[k * m..(k + 1) * m];
-            for e in 0..m {
-                num[e] += (qc * xs[e]).re;
-                den[e] += q2 * ys[e];
+            for (((nu_e, de), (r, i)), yy) in num
+                .iter_mut()
+                .zip(den.iter_mut())
+                .zip(xrs.iter().zip(xis))
+                .zip(ys)
+            {
+                // Re(conj(q) x) = q.re x.re + q.im x.im
+                *nu_e += q.re * r + q.im * i;
+                *de += q2 * yy;
             }
         }
         let mut total = 0.0;
@@ -515,10 +516,10 @@ pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
         |lf| eval(10f64.powf(lf), zeta, None),
         (best.1 / step).log10(),
         (best.1 * step).log10(),
-        24,
+        16,
     );
     let f_hz = 10f64.powf(lf);
-    let lz = golden_max(|lz| eval(f_hz, 10f64.powf(lz), None), -3.0, 0.0, 20);
+    let lz = golden_max(|lz| eval(f_hz, 10f64.powf(lz), None), -3.0, 0.0, 14);
     let cand = 10f64.powf(lz);
     if eval(f_hz, cand, None) > eval(f_hz, zeta, None) {
         zeta = cand;
@@ -742,11 +743,13 @@ pub struct ResidualPeak {
     pub line_ratio: f64,
     /// Share of the residual's excess energy in the localized region around the peak.
     pub excess_fraction: f64,
-    /// Damping of the fitted mode template ([`mode_signature`]).
+    /// Damping of the fitted mode template ([`mode_signature`]); NaN when the template
+    /// was not fitted.
     #[serde(with = "crate::serde_f64")]
     pub fit_zeta: f64,
     /// The fit of a mode at `f_hz` (complex residue per entry) to the residual
-    /// ([`mode_signature`]).
+    /// ([`mode_signature`]), evaluated only when the peak passes the other conditions of
+    /// `significant` (explained 0 otherwise).
     pub fit: TemplateFit,
     /// The two-sided rise of the relative residual at the peak
     /// ([`crate::Residual::relative_rise`]): >> 1 for a resonance that the model does
@@ -777,10 +780,13 @@ pub struct ResidualPeak {
 /// picker measures prominences against the noise; each localized region is analysed
 /// with `+-max(local_rel, 6 %)` of frequency around it (the picker's windows need
 /// +-5 %). The height over the noise is in noise units and does not depend on that
-/// choice. A region the picker returns no peak for is reported at its highest line
-/// (`from_picker = false`). Peaks are computed only where the localized test fires,
-/// which also keeps the cost small (the picker on the whole band of pure noise
-/// examines thousands of candidates).
+/// choice. The picker runs only on regions that hold a peak of the relative residual
+/// ([`crate::Residual::relative_rise`]): elsewhere the localized excess is a resonance of
+/// the model seen through a smooth factor the model lacks, and no missed mode; such
+/// regions, and regions the picker returns no peak for, are reported at their highest
+/// line (`from_picker = false`). This also keeps the cost small (the picker on the
+/// whole band of pure noise examines thousands of candidates; a delay's residual has a
+/// region at every resonance).
 ///
 /// Errors: the CMIF fails (a non-converging SVD).
 pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationError> {
@@ -796,9 +802,13 @@ pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationErr
     let f = &res.freq_hz;
     let ext = res.cfg.local_rel.max(0.06);
     let h = res.cfg.local_half_window;
-    // Analysis windows around the regions, merged.
+    // Analysis windows around the regions that hold a peak of the relative residual
+    // (only those can hold a missed mode), merged.
     let mut windows: Vec<std::ops::Range<usize>> = Vec::new();
-    for rg in &regions {
+    for rg in regions
+        .iter()
+        .filter(|rg| is_relative_peak(res, (*rg).clone()))
+    {
         let a = f
             .partition_point(|x| *x < f[rg.start] * (1.0 - ext))
             .min(rg.start.saturating_sub(h));
@@ -823,6 +833,15 @@ pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationErr
                 .sum::<f64>()
     };
     let thr = res.cfg.peak_over_local;
+    // The mode template is fitted only to candidates (the cheap tests first): the
+    // residual of a smooth factor has a peak at every resonance of the model.
+    let mode_fit_if = |candidate: bool, f_hz: f64, zeta: Option<f64>| -> (f64, TemplateFit) {
+        if candidate {
+            mode_signature(res, f_hz, zeta)
+        } else {
+            (f64::NAN, TemplateFit::new(res, 0.0, 2 * m + 2, 1))
+        }
+    };
     let mut out: Vec<ResidualPeak> = Vec::new();
     for w in &windows {
         let frf = Frf::new(
@@ -845,12 +864,11 @@ pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationErr
             let k = w.start + p.line;
             let Some(rg) = in_region(k) else { continue };
             let relative_rise = res.relative_rise(k);
-            let (fit_zeta, fit) = mode_signature(res, p.f_hz, p.damping);
             let height_over_noise = cm.sv2[p.line][p.sv_index] / line_noise(k);
-            let significant = sig
-                && relative_rise >= thr
-                && height_over_noise > res.cfg.min_peak_height
-                && fit.p_value < res.cfg.alpha;
+            let candidate =
+                sig && relative_rise >= thr && height_over_noise > res.cfg.min_peak_height;
+            let (fit_zeta, fit) = mode_fit_if(candidate, p.f_hz, p.damping);
+            let significant = candidate && fit.p_value < res.cfg.alpha;
             out.push(ResidualPeak {
                 f_hz: p.f_hz,
                 line: k,
@@ -887,12 +905,10 @@ pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationErr
                 .unwrap_or(0.0)
         };
         let relative_rise = res.relative_rise(k);
-        let (fit_zeta, fit) = mode_signature(res, f[k], None);
         let height_over_noise = sv1 * sv1 / line_noise(k);
-        let significant = sig
-            && relative_rise >= thr
-            && height_over_noise > res.cfg.min_peak_height
-            && fit.p_value < res.cfg.alpha;
+        let candidate = sig && relative_rise >= thr && height_over_noise > res.cfg.min_peak_height;
+        let (fit_zeta, fit) = mode_fit_if(candidate, f[k], None);
+        let significant = candidate && fit.p_value < res.cfg.alpha;
         out.push(ResidualPeak {
             f_hz: f[k],
             line: k,

@@ -280,6 +280,9 @@ pub fn chi2_mad_ratio(dof: f64) -> f64 {
         } else {
             hi = mid;
         }
+        if hi - lo < 1e-10 * m {
+            break;
+        }
     }
     0.5 * (lo + hi) / m
 }
@@ -320,7 +323,7 @@ impl ScaledChi2 {
                 } else {
                     hi = mid;
                 }
-                if hi / lo - 1.0 < 1e-6 {
+                if hi / lo - 1.0 < 2e-5 {
                     break;
                 }
             }
