@@ -1197,12 +1197,17 @@ pub(crate) fn is_relative_peak(res: &Residual, range: std::ops::Range<usize>) ->
 
 fn localized_fraction(res: &Residual) -> f64 {
     let n = res.n_lines();
-    localized_regions(res)
+    let s = localized_regions(res)
         .into_iter()
         .filter(|r| r.start > 0 && r.end < n && is_relative_peak(res, r.clone()))
         .map(|r| region_excess_fraction(res, r))
-        .sum::<f64>()
-        .min(1.0)
+        .sum::<f64>();
+    // (An empty f64 sum is -0.0.)
+    if s > 0.0 {
+        s.min(1.0)
+    } else {
+        0.0
+    }
 }
 
 /// The concentration of the excess energy in output rows and input columns (see
