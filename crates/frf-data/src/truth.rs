@@ -104,7 +104,8 @@ impl Truth {
                 });
             }
             let num = Mat::from_fn(ny, nu, |i, j| md.c[i] * md.b[j]);
-            m.pairs.push(PolePair::from_second_order(md.f_hz, md.zeta, &num));
+            m.pairs
+                .push(PolePair::from_second_order(md.f_hz, md.zeta, &num));
         }
         m.validate()?;
         Ok(m)
