@@ -15,27 +15,32 @@
 //! (Additive MIMO identification, `shared/papers/000_*`) count the flexible modes and
 //! initialise their frequencies.
 //!
-//! [`cmif`] computes the curves and keeps the singular vectors; [`pick_peaks`] selects
-//! the peaks that indicate modes. The picker addresses the two classic failure modes of a
-//! plain peak search on the sorted curves:
+//! [`cmif`] computes the curves and keeps the singular vectors (one-sided Jacobi for the
+//! small matrices of motion systems, faer's SVD otherwise: [`SvdMethod`]);
+//! [`pick_peaks`] selects the peaks that indicate modes. A plain peak search on the
+//! sorted curves fails in three ways, and the picker answers each:
 //!
 //! 1. **Crossing artefacts.** Sorting by magnitude makes curve `i` jump from one mode to
-//!    another where two curves cross (or nearly cross): the lower sorted curve then has a
-//!    cusp-shaped maximum that is no resonance. The picker therefore *tracks* the curves
-//!    from line to line by the similarity of their singular vectors (the product of the
-//!    MACs of the left and of the right singular vectors, the tracked CMIF of Allemang's
-//!    enhanced-CMIF practice), so that each tracked curve follows one mode through
-//!    a crossing, and it rejects any peak whose singular vectors on its two flanks differ
-//!    (a peak made of two different modes, which is what an unresolved avoided crossing
-//!    leaves behind).
-//! 2. **Duplicates and noise.** A mode can raise more than one curve at the same line; a
-//!    peak in a lower curve within a few lines of an accepted peak counts only when its
-//!    singular vectors differ from that peak's (a repeated root or a genuinely close
-//!    mode). Significance is the topographic prominence of the peak on the log-magnitude
-//!    curve relative to the higher of the two surrounding minima (the col), in dB; when
-//!    the data carry a variance, the peak is lowered and the col raised by
-//!    `noise_sigmas` times the noise level before the prominence is measured, so that
-//!    noise bumps do not count.
+//!    another where two curves cross or nearly cross: the lower curve gets a cusp-shaped
+//!    maximum that is no resonance, the upper one a V. Candidates are taken from the
+//!    sorted curves and from curves *tracked* through crossings by the similarity of
+//!    their singular vectors ([`Cmif::track`], the tracked CMIF of enhanced-CMIF
+//!    practice); a candidate sitting under a V of the curve above with a small gap is
+//!    dropped, and every candidate must pass the enhanced-FRF test below, which a cusp
+//!    (whose singular vectors mix two modes) fails.
+//! 2. **Modes hidden in a shoulder.** Close modes that share a mode shape (same sensor
+//!    vector, different actuator vectors, as in the wafer stage's 913/928 Hz pair) sit on
+//!    one singular value: the weaker shows as a shoulder of a few tenths of a dB. The
+//!    *enhanced FRF* of Shih et al. (1988), `e(w) = u^H G(w) v` with the singular vectors
+//!    of the candidate's line held fixed ([`Cmif::enhanced_frf`]), projects `G` on the
+//!    candidate's mode: its peak is clear when the modes' participation vectors differ.
+//!    A candidate counts when `|e|` peaks within 0.4 % of it with enough topographic
+//!    prominence (in dB, relative to the higher of the two surrounding minima); the
+//!    half-power width of that peak also estimates the damping.
+//! 3. **Noise and duplicates.** The prominence is measured after lowering the peak and
+//!    raising the col by `noise_sigmas` standard deviations of `e`, from the `_var`
+//!    columns or, without them, from the second differences of `e` across the window; a
+//!    mode seen on several curves is reported once ([`PeakConfig::merge_similarity`]).
 
 use crate::{FrfDataset, FrfError, C64};
 use faer::diag::Diag;

@@ -28,7 +28,9 @@
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! use frf_data::FrfDataset;
 //! let data = frf_data::io::read_frf_csv("wafer.csv")?;
-//! # let model_response: realize::ResponseGrid = todo!();
+//! // The fitted model's response at the data's lines (here an empty model).
+//! let model = realize::ModalModel::new(data.ny(), data.nu());
+//! let model_response = model.freq_response(&data.omegas())?;
 //! let noise = validation::noise_level(&data)?;
 //! let cfg = validation::ResidualConfig { sample_rate_hz: Some(10e3), ..Default::default() };
 //! let a = validation::analyze_residual(&data, &model_response, &noise, &cfg)?;
@@ -43,6 +45,7 @@
 pub mod error;
 pub mod noise;
 pub mod residual;
+mod serde_f64;
 pub mod signatures;
 pub mod stats;
 
@@ -54,7 +57,7 @@ pub use residual::{
     TrendClass,
 };
 pub use signatures::{
-    feedthrough_signature, hold_signature, io_factors, phase_trend, residual_peaks,
+    feedthrough_signature, hold_signature, io_factors, mode_signature, phase_trend, residual_peaks,
     stiffness_signature, FeedthroughSignature, HoldSignature, IoFactor, PhaseTrend, ResidualPeak,
     StiffnessSignature, TemplateFit,
 };

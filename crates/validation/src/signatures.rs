@@ -27,8 +27,8 @@
 //! model's response `P` (noise-free), so `E / P` stands for the relative residual
 //! `E / G` (equal to first order).
 
-use crate::residual::{localized_regions, region_excess_fraction, Residual};
-use crate::stats::{chi2_sf, median};
+use crate::residual::{is_relative_peak, localized_regions, region_excess_fraction, Residual};
+use crate::stats::chi2_sf;
 use crate::ValidationError;
 use frf_data::cmif::{cmif, pick_peaks};
 use frf_data::{Frf, C64};
@@ -142,17 +142,19 @@ struct FactorFit {
 
 /// Fits `theta` of a per-line factor to the per-line sums by Gauss-Newton from the
 /// small-`theta` (linear, `g ~ -j w theta`) estimate, with step halving so that the
-/// explained energy never decreases. `std = sqrt(c / sum |g'|^2 A)`.
+/// explained energy never decreases; stops when the step is below 1e-4 of the
+/// statistical uncertainty. `std = sqrt(c / sum |g'|^2 A)`.
 fn fit_factor(omega: &[f64], a: &[f64], b: &[C64], kind: Factor, c: f64) -> FactorFit {
-    let gain = |theta: f64| -> f64 {
-        omega
-            .iter()
-            .zip(a.iter().zip(b))
-            .map(|(&w, (&ak, bk))| {
-                let (g, _) = kind.g(w, theta);
-                2.0 * (g.conj() * bk).re - g.norm_sqr() * ak
-            })
-            .sum()
+    // Explained energy, gradient and Gauss-Newton curvature at theta, in one pass.
+    let eval = |theta: f64| -> (f64, f64, f64) {
+        let (mut v, mut gr, mut h) = (0.0, 0.0, 0.0);
+        for (&w, (&ak, bk)) in omega.iter().zip(a.iter().zip(b)) {
+            let (g, dg) = kind.g(w, theta);
+            v += 2.0 * (g.conj() * bk).re - g.norm_sqr() * ak;
+            gr += (dg.conj() * (bk - g * ak)).re;
+            h += dg.norm_sqr() * ak;
+        }
+        (v, gr, h)
     };
     // Linear start: Re sum conj(-j w) B / sum w^2 A = -sum w Im B / sum w^2 A.
     let (mut num, mut den) = (0.0, 0.0);
@@ -170,41 +172,31 @@ fn fit_factor(omega: &[f64], a: &[f64], b: &[C64], kind: Factor, c: f64) -> Fact
     }
     let linear = num / den;
     let mut theta = linear;
-    let mut best = gain(theta);
+    let (mut best, mut gr, mut h) = eval(theta);
     for _ in 0..30 {
-        let (mut gr, mut h) = (0.0, 0.0);
-        for (&w, (&ak, bk)) in omega.iter().zip(a.iter().zip(b)) {
-            let (g, dg) = kind.g(w, theta);
-            gr += (dg.conj() * (bk - g * ak)).re;
-            h += dg.norm_sqr() * ak;
-        }
-        if !(h > 0.0) {
+        if !(h > 0.0 && h.is_finite()) {
             break;
         }
-        // Stop once the step is far below the statistical uncertainty sqrt(c / h).
         let tol = 1e-4 * (c / h).sqrt();
         let mut step = gr / h;
-        let mut improved = false;
+        let mut moved = false;
         for _ in 0..40 {
-            let t = theta + step;
-            let v = gain(t);
+            let (v, g2, h2) = eval(theta + step);
             if v.is_finite() && v >= best {
-                theta = t;
-                best = v;
-                improved = true;
+                theta += step;
+                (best, gr, h) = (v, g2, h2);
+                moved = true;
                 break;
             }
             step *= 0.5;
+            if step.abs() <= tol {
+                break;
+            }
         }
-        if !improved || step.abs() <= tol {
+        if !moved || step.abs() <= tol {
             break;
         }
     }
-    let h: f64 = omega
-        .iter()
-        .zip(a)
-        .map(|(&w, &ak)| kind.g(w, theta).1.norm_sqr() * ak)
-        .sum();
     FactorFit {
         theta,
         std: if h > 0.0 {
@@ -225,8 +217,10 @@ pub struct PhaseTrend {
     /// delay (over-compensation).
     pub delay_s: f64,
     /// Standard error of `delay_s` (calibrated noise scale), seconds.
+    #[serde(with = "crate::serde_f64")]
     pub std_s: f64,
     /// `delay_s / std_s`.
+    #[serde(with = "crate::serde_f64")]
     pub z: f64,
     /// The small-delay (linear least-squares) estimate from `E ~ -j w d P`, the start of
     /// the Gauss-Newton refinement on the exact factor; biased low when `w d` reaches
@@ -265,8 +259,10 @@ pub struct HoldSignature {
     /// the model lacks exactly the droop of a hold at `fs` (about 1.1 at a fifth of
     /// `fs` for a rigid-body-dominated plant, where the hold's aliasing adds to the
     /// droop).
+    #[serde(with = "crate::serde_f64")]
     pub amplitude: f64,
     /// Standard error of `amplitude`.
+    #[serde(with = "crate::serde_f64")]
     pub amplitude_std: f64,
     /// Weighted correlation (cosine, not centred) of `Re(E / P)` with `h(w)`, weights
     /// `|P|^2 / var`: 1 when the real relative residual has exactly the shape of the
@@ -275,6 +271,7 @@ pub struct HoldSignature {
     /// Share of the relative residual's energy in `Im(E / P)` (weights as above). A
     /// hold whose half-sample delay has been compensated leaves almost none; a delay
     /// leaves almost all.
+    #[serde(with = "crate::serde_f64")]
     pub imag_fraction: f64,
     /// The sample rate the fitted droop corresponds to, `fs / sqrt(a)` (`None` for
     /// `a <= 0`).
@@ -412,8 +409,10 @@ pub struct StiffnessSignature {
     /// Fitted suspension frequency, Hz. Identified only when the band reaches down to
     /// about `2 f_hz`; below that the residual is `~ (w0 / w)^2 P` and only
     /// `gain * f_hz^2` is determined (see `equivalent_f_hz`).
+    #[serde(with = "crate::serde_f64")]
     pub f_hz: f64,
     /// Fitted suspension damping.
+    #[serde(with = "crate::serde_f64")]
     pub zeta: f64,
     /// Fitted gain per entry (`vec` order): the share of the entry's response that is
     /// the suspended body (1 where the rigid body dominates the low frequencies).
@@ -421,6 +420,7 @@ pub struct StiffnessSignature {
     /// `f_hz * sqrt(g)`, `g` the weighted mean gain: the suspension frequency if the
     /// rigid body carried the whole low-frequency response (robust when `f_hz` is below
     /// the band).
+    #[serde(with = "crate::serde_f64")]
     pub equivalent_f_hz: f64,
     /// The fit (`ny nu + 2` parameters).
     pub fit: TemplateFit,
@@ -438,12 +438,16 @@ pub struct StiffnessSignature {
 /// `zeta` in `[1e-3, 1]`. Lines above `100 w0` (where `|q| < 1e-4`) are skipped.
 pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
     let (n, m) = (res.n_lines(), res.ny * res.nu);
-    // x = conj(P) E / var, y = |P|^2 / var.
-    let mut x = vec![C64::new(0.0, 0.0); n * m];
+    // x = conj(P) E / var (real and imaginary parts apart, so that the inner loop
+    // vectorises), y = |P|^2 / var.
+    let mut xr = vec![0.0; n * m];
+    let mut xi = vec![0.0; n * m];
     let mut y = vec![0.0; n * m];
     for i in 0..n * m {
         let p = res.model[i];
-        x[i] = p.conj() * res.error[i] * res.weight[i];
+        let x = p.conj() * res.error[i] * res.weight[i];
+        xr[i] = x.re;
+        xi[i] = x.im;
         y[i] = p.norm_sqr() * res.weight[i];
     }
     let omega = &res.omega;
@@ -458,13 +462,18 @@ pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
             let s = C64::new(0.0, omega[k]);
             let a = C64::new(w0 * w0, 0.0) + s * (2.0 * zeta * w0);
             let q = -a / (s * s + a);
-            let qc = q.conj();
             let q2 = q.norm_sqr();
-            let xs = &x[k * m..(k + 1) * m];
+            let (xrs, xis) = (&xr[k * m..(k + 1) * m], &xi[k * m..(k + 1) * m]);
             let ys = &y[k * m..(k + 1) * m];
-            for e in 0..m {
-                num[e] += (qc * xs[e]).re;
-                den[e] += q2 * ys[e];
+            for (((nu_e, de), (r, i)), yy) in num
+                .iter_mut()
+                .zip(den.iter_mut())
+                .zip(xrs.iter().zip(xis))
+                .zip(ys)
+            {
+                // Re(conj(q) x) = q.re x.re + q.im x.im
+                *nu_e += q.re * r + q.im * i;
+                *de += q2 * yy;
             }
         }
         let mut total = 0.0;
@@ -507,10 +516,10 @@ pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
         |lf| eval(10f64.powf(lf), zeta, None),
         (best.1 / step).log10(),
         (best.1 * step).log10(),
-        24,
+        16,
     );
     let f_hz = 10f64.powf(lf);
-    let lz = golden_max(|lz| eval(f_hz, 10f64.powf(lz), None), -3.0, 0.0, 20);
+    let lz = golden_max(|lz| eval(f_hz, 10f64.powf(lz), None), -3.0, 0.0, 14);
     let cand = 10f64.powf(lz);
     if eval(f_hz, cand, None) > eval(f_hz, zeta, None) {
         zeta = cand;
@@ -534,6 +543,77 @@ pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
         gains,
         fit: TemplateFit::new(res, explained, m + 2, 1),
     }
+}
+
+/// The signature of a missed mode at `f_hz`: the template
+/// `E_ke ~ u_e w^2 / (w^2 - w_k^2 + 2 j zeta w w_k)` (`w = 2 pi f_hz`) with a complex
+/// residue `u_e` per entry, fitted by weighted least squares. (A lightly damped mode's
+/// residue `c b^T` is real, but a delay or hold that the model applies to its whole
+/// response rotates the missing mode's residual too: by 28 degrees at 520 Hz with the
+/// 150 us of the reference wafer stage, enough to bias a real-residue fit's damping by
+/// 20 %.) `zeta` is the picker's half-power estimate refined by a golden-section search
+/// on `log zeta` within half a decade of it (or searched up to 0.3 when the picker left
+/// it unresolved), never below `df / f_hz` (a half-power bandwidth of two line spacings:
+/// a narrower "mode" would fit a single noisy line). The fit runs over the lines within
+/// `+-max(20 %, 5 half-power bandwidths)` of `f_hz` (at least 50 lines each side), where
+/// the template holds nearly all its energy; `explained_fraction` is relative to the
+/// whole residual's excess. Returns `(zeta, fit)` with `2 ny nu + 2` parameters.
+pub fn mode_signature(res: &Residual, f_hz: f64, zeta_hint: Option<f64>) -> (f64, TemplateFit) {
+    let (n, m) = (res.n_lines(), res.ny * res.nu);
+    let f = &res.freq_hz;
+    if !(f_hz.is_finite() && f_hz > 0.0) || n == 0 {
+        return (f64::NAN, TemplateFit::new(res, 0.0, 2 * m + 2, 1));
+    }
+    let wp = TAU * f_hz;
+    let mut num = vec![C64::new(0.0, 0.0); m];
+    let mut den = vec![0.0; m];
+    let k0 = f.partition_point(|x| *x < f_hz);
+    let mut eval = |zeta: f64| -> f64 {
+        let half = (0.2f64).max(5.0 * zeta);
+        let a = f
+            .partition_point(|x| *x < f_hz * (1.0 - half))
+            .min(k0.saturating_sub(50));
+        let b = f
+            .partition_point(|x| *x <= f_hz * (1.0 + half))
+            .max((k0 + 50).min(n));
+        num.iter_mut().for_each(|v| *v = C64::new(0.0, 0.0));
+        den.iter_mut().for_each(|v| *v = 0.0);
+        for k in a..b {
+            let w = res.omega[k];
+            let h = C64::new(wp * wp, 0.0) / C64::new(wp * wp - w * w, 2.0 * zeta * wp * w);
+            let (hc, h2) = (h.conj(), h.norm_sqr());
+            for e in 0..m {
+                let i = k * m + e;
+                num[e] += hc * res.error[i] * res.weight[i];
+                den[e] += h2 * res.weight[i];
+            }
+        }
+        (0..m)
+            .filter(|e| den[*e] > 0.0)
+            .map(|e| num[e].norm_sqr() / den[e])
+            .sum()
+    };
+    // A resolved mode spans at least a few lines: half-power bandwidth 2 zeta f of at
+    // least two line spacings (otherwise a single noisy line passes for a mode).
+    let df = if k0 > 0 && k0 < n {
+        f[k0] - f[k0 - 1]
+    } else if n > 1 {
+        f[1] - f[0]
+    } else {
+        0.0
+    };
+    let zmin = (df / f_hz).clamp(1e-4, 0.1).log10();
+    let (lo, hi) = match zeta_hint {
+        Some(z) if z.is_finite() && z > 0.0 => {
+            let lz = z.clamp(1e-4, 0.3).log10();
+            ((lz - 0.5).max(zmin), (lz + 0.5).min(-0.5).max(zmin + 0.1))
+        }
+        _ => (zmin, -0.5),
+    };
+    let lz = golden_max(|lz| eval(10f64.powf(lz)), lo, hi, 30);
+    let zeta = 10f64.powf(lz);
+    let explained = eval(zeta);
+    (zeta, TemplateFit::new(res, explained, 2 * m + 2, 1))
 }
 
 /// Golden-section search for the maximum of `f` on `[a, b]`.
@@ -576,8 +656,10 @@ pub struct IoFactor {
     /// lead (or when the model has too much lag).
     pub tau_s: f64,
     /// Standard error of `tau_s`.
+    #[serde(with = "crate::serde_f64")]
     pub tau_std_s: f64,
     /// `1 / (2 pi |tau|)`, Hz.
+    #[serde(with = "crate::serde_f64")]
     pub pole_hz: f64,
     /// The fit (1 parameter; p-value Bonferroni-corrected over the rows or columns).
     /// Flagged only for the dominant row or column of [`crate::Concentration`].
@@ -649,6 +731,7 @@ pub struct ResidualPeak {
     /// whole line (`kappa sum_e var_e`): a power ratio, above 1 when this one singular
     /// direction holds more than all the noise of the line (pure noise gives about
     /// 0.3-0.6 for `sigma_1` of a 4 x 13 matrix).
+    #[serde(with = "crate::serde_f64")]
     pub height_over_noise: f64,
     /// The picker's prominence, dB (`None` for a localized excess the picker did not
     /// return as a peak).
@@ -656,18 +739,29 @@ pub struct ResidualPeak {
     /// Half-power damping estimate of the picker, when resolved.
     pub damping: Option<f64>,
     /// The line statistic at the peak over the calibrated noise mean (`s_k / (c nu)`).
+    #[serde(with = "crate::serde_f64")]
     pub line_ratio: f64,
     /// Share of the residual's excess energy in the localized region around the peak.
     pub excess_fraction: f64,
-    /// The relative residual `rho_k = sum_e |E|^2 / var / sum_e |P|^2 / var` at the
-    /// peak over its median in the analysis window: a missed mode is a resonance of `E`
-    /// that `P` does not share, so `rho` peaks (rise >> 1); the residual of a smooth
-    /// factor the model lacks (a delay, a hold, actuator dynamics) peaks at the model's
-    /// own resonances with `rho` smooth (rise ~ 1).
+    /// Damping of the fitted mode template ([`mode_signature`]); NaN when the template
+    /// was not fitted.
+    #[serde(with = "crate::serde_f64")]
+    pub fit_zeta: f64,
+    /// The fit of a mode at `f_hz` (complex residue per entry) to the residual
+    /// ([`mode_signature`]), evaluated only when the peak passes the other conditions of
+    /// `significant` (explained 0 otherwise).
+    pub fit: TemplateFit,
+    /// The two-sided rise of the relative residual at the peak
+    /// ([`crate::Residual::relative_rise`]): >> 1 for a resonance that the model does
+    /// not share, ~1 for the model's own resonance seen through a smooth factor.
+    #[serde(with = "crate::serde_f64")]
     pub relative_rise: f64,
     /// The residual is significant, the peak lies in a region of the localized test of
-    /// [`crate::residual`], and its `relative_rise` reaches
-    /// [`crate::ResidualConfig::peak_over_local`]: a missed-mode candidate.
+    /// [`crate::residual`], its `relative_rise` reaches
+    /// [`crate::ResidualConfig::peak_over_local`], its height over the noise exceeds
+    /// [`crate::ResidualConfig::min_peak_height`] and the mode template's p-value is
+    /// below `alpha`: a missed-mode candidate. (No minimum explained fraction: with
+    /// several missed modes each explains only its share.)
     pub significant: bool,
     /// False for a localized excess that the CMIF picker did not return as a peak
     /// (reported at its highest line).
@@ -686,10 +780,13 @@ pub struct ResidualPeak {
 /// picker measures prominences against the noise; each localized region is analysed
 /// with `+-max(local_rel, 6 %)` of frequency around it (the picker's windows need
 /// +-5 %). The height over the noise is in noise units and does not depend on that
-/// choice. A region the picker returns no peak for is reported at its highest line
-/// (`from_picker = false`). Peaks are computed only where the localized test fires,
-/// which also keeps the cost small (the picker on the whole band of pure noise
-/// examines thousands of candidates).
+/// choice. The picker runs only on regions that hold a peak of the relative residual
+/// ([`crate::Residual::relative_rise`]): elsewhere the localized excess is a resonance of
+/// the model seen through a smooth factor the model lacks, and no missed mode; such
+/// regions, and regions the picker returns no peak for, are reported at their highest
+/// line (`from_picker = false`). This also keeps the cost small (the picker on the
+/// whole band of pure noise examines thousands of candidates; a delay's residual has a
+/// region at every resonance).
 ///
 /// Errors: the CMIF fails (a non-converging SVD).
 pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationError> {
@@ -705,9 +802,13 @@ pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationErr
     let f = &res.freq_hz;
     let ext = res.cfg.local_rel.max(0.06);
     let h = res.cfg.local_half_window;
-    // Analysis windows around the regions, merged.
+    // Analysis windows around the regions that hold a peak of the relative residual
+    // (only those can hold a missed mode), merged.
     let mut windows: Vec<std::ops::Range<usize>> = Vec::new();
-    for rg in &regions {
+    for rg in regions
+        .iter()
+        .filter(|rg| is_relative_peak(res, (*rg).clone()))
+    {
         let a = f
             .partition_point(|x| *x < f[rg.start] * (1.0 - ext))
             .min(rg.start.saturating_sub(h));
@@ -731,30 +832,16 @@ pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationErr
                 .map(|w| 1.0 / w)
                 .sum::<f64>()
     };
-    // Relative residual per line.
-    let rho: Vec<f64> = (0..n)
-        .map(|k| {
-            let (mut ee, mut pp) = (0.0, 0.0);
-            for i in k * m..(k + 1) * m {
-                ee += res.error[i].norm_sqr() * res.weight[i];
-                pp += res.model[i].norm_sqr() * res.weight[i];
-            }
-            if pp > 0.0 {
-                ee / pp
-            } else {
-                f64::INFINITY
-            }
-        })
-        .collect();
-    let rise = |k: usize, w: &std::ops::Range<usize>| -> f64 {
-        let med = median(&rho[w.clone()]);
-        if med > 0.0 {
-            rho[k] / med
+    let thr = res.cfg.peak_over_local;
+    // The mode template is fitted only to candidates (the cheap tests first): the
+    // residual of a smooth factor has a peak at every resonance of the model.
+    let mode_fit_if = |candidate: bool, f_hz: f64, zeta: Option<f64>| -> (f64, TemplateFit) {
+        if candidate {
+            mode_signature(res, f_hz, zeta)
         } else {
-            f64::INFINITY
+            (f64::NAN, TemplateFit::new(res, 0.0, 2 * m + 2, 1))
         }
     };
-    let thr = res.cfg.peak_over_local;
     let mut out: Vec<ResidualPeak> = Vec::new();
     for w in &windows {
         let frf = Frf::new(
@@ -776,18 +863,25 @@ pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationErr
             }
             let k = w.start + p.line;
             let Some(rg) = in_region(k) else { continue };
-            let relative_rise = rise(k, w);
+            let relative_rise = res.relative_rise(k);
+            let height_over_noise = cm.sv2[p.line][p.sv_index] / line_noise(k);
+            let candidate =
+                sig && relative_rise >= thr && height_over_noise > res.cfg.min_peak_height;
+            let (fit_zeta, fit) = mode_fit_if(candidate, p.f_hz, p.damping);
+            let significant = candidate && fit.p_value < res.cfg.alpha;
             out.push(ResidualPeak {
                 f_hz: p.f_hz,
                 line: k,
                 sv_index: p.sv_index,
-                height_over_noise: cm.sv2[p.line][p.sv_index] / line_noise(k),
+                height_over_noise,
                 prominence_db: Some(p.prominence),
                 damping: p.damping,
                 line_ratio: res.line_stat[k] / mu,
                 excess_fraction: region_excess_fraction(res, rg.clone()),
+                fit_zeta,
+                fit,
                 relative_rise,
-                significant: sig && relative_rise >= thr,
+                significant,
                 from_picker: true,
             });
         }
@@ -810,23 +904,24 @@ pub fn residual_peaks(res: &Residual) -> Result<Vec<ResidualPeak>, ValidationErr
                 .and_then(|v| v.first().copied())
                 .unwrap_or(0.0)
         };
-        let w = windows
-            .iter()
-            .find(|w| w.start <= k && k < w.end)
-            .cloned()
-            .unwrap_or(rg.clone());
-        let relative_rise = rise(k, &w);
+        let relative_rise = res.relative_rise(k);
+        let height_over_noise = sv1 * sv1 / line_noise(k);
+        let candidate = sig && relative_rise >= thr && height_over_noise > res.cfg.min_peak_height;
+        let (fit_zeta, fit) = mode_fit_if(candidate, f[k], None);
+        let significant = candidate && fit.p_value < res.cfg.alpha;
         out.push(ResidualPeak {
             f_hz: f[k],
             line: k,
             sv_index: 0,
-            height_over_noise: sv1 * sv1 / line_noise(k),
+            height_over_noise,
             prominence_db: None,
             damping: None,
             line_ratio: res.line_stat[k] / mu,
             excess_fraction: region_excess_fraction(res, rg.clone()),
+            fit_zeta,
+            fit,
             relative_rise,
-            significant: sig && relative_rise >= thr,
+            significant,
             from_picker: false,
         });
     }

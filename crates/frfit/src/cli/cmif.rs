@@ -26,8 +26,9 @@ pub struct Args {
     /// Write the CMIF figure (singular values and picked peaks) to this SVG file.
     #[arg(long, value_name = "FILE")]
     pub svg: Option<PathBuf>,
-    /// Print JSON to stdout: {"peaks": [{"f_hz", "sv_index" (0-based), "prominence" (dB)}],
-    /// "band_hz": [lo, hi] (first and last line used), "n_lines"}.
+    /// Print JSON to stdout: {"peaks": [{"f_hz", "sv_index" (0-based), "prominence" (dB),
+    /// "damping" (half-power estimate or null), "line", "sv2"}], "band_hz": [lo, hi] (first
+    /// and last line used), "n_lines"}.
     #[arg(long)]
     pub json: bool,
 }
@@ -80,6 +81,7 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
                 "f_hz": p.f_hz,
                 "sv_index": p.sv_index,
                 "prominence": p.prominence,
+                "damping": p.damping,
                 "line": p.line,
                 "sv2": p.sv2,
             })).collect::<Vec<_>>(),
@@ -108,20 +110,26 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         return Ok(());
     }
     println!(
-        "{:>4}  {:>12}  {:>6}  {:>16}",
-        "#", "f [Hz]", "sigma", "prominence [dB]"
+        "{:>4}  {:>12}  {:>6}  {:>16}  {:>8}",
+        "#", "f [Hz]", "sigma", "prominence [dB]", "damping"
     );
     for (i, p) in peaks.iter().enumerate() {
+        let z = p
+            .damping
+            .map(|z| format!("{z:.4}"))
+            .unwrap_or_else(|| "-".into());
         println!(
-            "{:>4}  {:>12.3}  {:>6}  {:>16.1}",
+            "{:>4}  {:>12.3}  {:>6}  {:>16.1}  {:>8}",
             i + 1,
             p.f_hz,
             p.sv_index + 1,
-            p.prominence
+            p.prominence,
+            z
         );
     }
     println!(
-        "{} peak(s); sigma is the 1-based singular value index",
+        "{} peak(s); sigma: 1-based singular value index; damping: half-power estimate from \
+         the enhanced FRF",
         peaks.len()
     );
     Ok(())

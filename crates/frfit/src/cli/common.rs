@@ -116,7 +116,13 @@ pub fn fmt_num(v: f64) -> String {
             s
         }
     } else {
-        format!("{v:.4e}")
+        let s = format!("{v:.4e}");
+        match s.split_once('e') {
+            Some((m, e)) if m.contains('.') => {
+                format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.'))
+            }
+            _ => s,
+        }
     }
 }
 
@@ -162,6 +168,7 @@ mod tests {
         assert_eq!(quantile(&mut [], 0.5), None);
         assert_eq!(fmt_num(0.25), "0.25");
         assert_eq!(fmt_num(1999.75), "1999.75");
-        assert_eq!(fmt_num(1.5e-7), "1.5000e-7");
+        assert_eq!(fmt_num(1.5e-7), "1.5e-7");
+        assert_eq!(fmt_num(2.31204e-4), "2.312e-4");
     }
 }

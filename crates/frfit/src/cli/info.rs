@@ -71,6 +71,15 @@ fn summarise(d: &Frf) -> Summary {
     }
 }
 
+/// A relative level in dB (`20 log10`).
+fn fmt_db(r: f64) -> String {
+    if r > 0.0 && r.is_finite() {
+        format!("{:.1} dB", 20.0 * r.log10())
+    } else {
+        "-inf dB".into()
+    }
+}
+
 /// Runs `frfit info`.
 pub fn run(args: Args, _quiet: bool) -> Result<(), FrfitError> {
     let d = load_data(&args.data)?;
@@ -126,9 +135,11 @@ pub fn run(args: Args, _quiet: bool) -> Result<(), FrfitError> {
     }
     match s.noise {
         Some((m, p)) => println!(
-            "noise:        sqrt(var)/|G| median {}, 95th percentile {} (over all lines and entries)",
+            "noise:        sqrt(var)/|G| median {} ({}), 95th percentile {} ({}) over all lines and entries",
             fmt_num(m),
-            fmt_num(p)
+            fmt_db(m),
+            fmt_num(p),
+            fmt_db(p)
         ),
         None if d.has_variance() => {
             println!("noise:        variance present but every |G| is zero; no relative level")
