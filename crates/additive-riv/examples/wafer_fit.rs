@@ -42,7 +42,14 @@ fn main() {
     }
     if args.iter().any(|a| a == "truemodes") {
         let t = frf_data::truth::Truth::read(dir.join(format!("{name}.truth.json"))).unwrap();
-        cfg.modes = ModeSelection::Frequencies(t.model.modes.iter().map(|m| m.f_hz).filter(|&f| f < 2000.0).collect());
+        cfg.modes = ModeSelection::Frequencies(
+            t.model
+                .modes
+                .iter()
+                .map(|m| m.f_hz)
+                .filter(|&f| f < 2000.0)
+                .collect(),
+        );
     }
     if args.iter().any(|a| a == "fixdelay") {
         cfg.delay = DelayChoice::Fixed { seconds: 150e-6 };

@@ -489,7 +489,7 @@ impl AdditiveModel {
                 scale: wn,
                 num_poly: vec![1.0],
                 zoh_shape: false,
-            bypass_factor: false,
+                bypass_factor: false,
             },
             Domain::ZohDiscrete { ts } => {
                 if wn * ts >= PI {

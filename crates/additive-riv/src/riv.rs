@@ -130,9 +130,14 @@ pub const SK_RESCUE: usize = 10;
 /// regressor as its own instrument, robust far away but biased at its fixed point),
 /// followed by Algorithm 1 again, whose fixed point is the optimum of (8); the fit's
 /// messages say so.
-pub fn iterate(model: AdditiveModel, data: &FitData, cfg: &RivConfig) -> Result<Fit<AdditiveModel>, RivError> {
+pub fn iterate(
+    model: AdditiveModel,
+    data: &FitData,
+    cfg: &RivConfig,
+) -> Result<Fit<AdditiveModel>, RivError> {
     let first = iterate_core(model.clone(), data, cfg)?;
-    let stalled = matches!(first.convergence, Convergence::Failed { .. }) && cfg.method == IvMethod::Riv;
+    let stalled =
+        matches!(first.convergence, Convergence::Failed { .. }) && cfg.method == IvMethod::Riv;
     if !stalled {
         return Ok(first);
     }

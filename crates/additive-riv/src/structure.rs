@@ -267,6 +267,9 @@ fn mode_f_hz(model: &AdditiveModel, i: usize) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
+/// Removed (submodel index, frequency, reason) and per-submodel (frequency, F statistic).
+type DropOutcome = (Vec<(usize, f64, String)>, Vec<(f64, f64)>);
+
 /// Removes unstable, overdamped, out-of-band, unresolved and duplicated modes (checks on
 /// the poles alone), then the modes whose numerators are insignificant (F test at
 /// `alpha` with the effective number of parameters, and at least `min_f`). Returns the
@@ -278,7 +281,7 @@ fn drop_pass(
     data: &FitData,
     cfg: &AdaptConfig,
     protect: &[usize],
-) -> Result<(Vec<(usize, f64, String)>, Vec<(f64, f64)>), RivError> {
+) -> Result<DropOutcome, RivError> {
     let m = data.m();
     let (lo, hi) = data.band_hz;
     let n_sub = model.submodels.len();
@@ -371,7 +374,7 @@ fn drop_pass(
             }
         }
     }
-    remove.sort_by(|x, y| y.0.cmp(&x.0));
+    remove.sort_by_key(|x| std::cmp::Reverse(x.0));
     remove.dedup_by_key(|x| x.0);
     let mut out = Vec::new();
     for (i, why) in remove {
@@ -480,7 +483,7 @@ pub fn adapt_modes(
                     ));
                 }
             }
-            local_reject.sort_by(|a, b| b.0.cmp(&a.0));
+            local_reject.sort_by_key(|a| std::cmp::Reverse(a.0));
             for (i, _, _) in &local_reject {
                 model.remove_submodel(*i);
             }

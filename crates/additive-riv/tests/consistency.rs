@@ -188,7 +188,11 @@ fn bypass_feedthrough_with_fitted_delay_recovered() {
     let mut truth = case
         .truth
         .clone()
-        .with_factor(KnownFactor { delay_s: 5e-4, fit_delay: true, ..Default::default() })
+        .with_factor(KnownFactor {
+            delay_s: 5e-4,
+            fit_delay: true,
+            ..Default::default()
+        })
         .unwrap();
     let i = truth.push_bypass_feedthrough().unwrap();
     for j in 0..2 {
@@ -199,14 +203,25 @@ fn bypass_feedthrough_with_fitted_delay_recovered() {
     let data = simulate(&truth, &case.freqs, 0.0, 21);
     let fd = FitData::new(&data, &Weighting::InverseMagnitude).unwrap();
     let mut start = perturbed_start(&case, 0.01, 21)
-        .with_factor(KnownFactor { delay_s: 4.7e-4, fit_delay: true, ..Default::default() })
+        .with_factor(KnownFactor {
+            delay_s: 4.7e-4,
+            fit_delay: true,
+            ..Default::default()
+        })
         .unwrap();
     start.push_bypass_feedthrough().unwrap();
     fit_numerators(&mut start, &fd).unwrap();
-    let f = AdditiveRiv::new(RivConfig::default()).refine(start, &fd).unwrap();
+    let f = AdditiveRiv::new(RivConfig::default())
+        .refine(start, &fd)
+        .unwrap();
     assert!(f.convergence.is_converged(), "{:?}", f.convergence);
     let (p, q) = (f.model.params(), truth.params());
     let n = p.len();
-    assert!((p[n - 1] - q[n - 1]).abs() < 1e-12, "delay {} vs {}", p[n - 1], q[n - 1]);
+    assert!(
+        (p[n - 1] - q[n - 1]).abs() < 1e-12,
+        "delay {} vs {}",
+        p[n - 1],
+        q[n - 1]
+    );
     assert!(max_rel_param_error(&f.model, &truth) < 1e-8);
 }

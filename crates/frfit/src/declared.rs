@@ -127,11 +127,16 @@ pub fn declared(frf: &Frf) -> Declared {
     for c in &frf.comments {
         let lower = c.to_ascii_lowercase();
         if lower.contains("hold") && !d.zoh {
-            let absent = lower.contains("false") || lower.contains("no hold") || lower.contains("without hold");
-            let present = lower.contains("true") || lower.contains("present") || lower.contains("zero-order hold");
+            let absent = lower.contains("false")
+                || lower.contains("no hold")
+                || lower.contains("without hold");
+            let present = lower.contains("true")
+                || lower.contains("present")
+                || lower.contains("zero-order hold");
             if present && !absent {
                 d.zoh = true;
-                d.sources.push(format!("zero-order hold from the comment \"{}\"", c.trim()));
+                d.sources
+                    .push(format!("zero-order hold from the comment \"{}\"", c.trim()));
             }
         }
         if d.fs_hz.is_none() {
@@ -184,7 +189,10 @@ mod tests {
         assert!((d.delay_s.unwrap() - 150e-6).abs() < 1e-12);
         assert!(d.zoh);
         assert_eq!(d.sources.len(), 3);
-        let f = frf_with(&["sampling 10 kHz; hold and computation delay ~150 us present: False"], &[]);
+        let f = frf_with(
+            &["sampling 10 kHz; hold and computation delay ~150 us present: False"],
+            &[],
+        );
         assert!(!declared(&f).zoh);
     }
 

@@ -639,7 +639,10 @@ pub fn run(
     // a hold the file declares (with its sample rate) is modelled from the start, like
     // one given with --hold; it is not a discovery of the loop
     let hold = cfg.hold.or_else(|| match (decl.zoh, fs_hz) {
-        (true, Some(fs)) if cfg.frf_type == FrfType::Displacement && fs / 2.0 > hi.min(data.freq_hz_slice()[data.n_lines() - 1]) => {
+        (true, Some(fs))
+            if cfg.frf_type == FrfType::Displacement
+                && fs / 2.0 > hi.min(data.freq_hz_slice()[data.n_lines() - 1]) =>
+        {
             Some(Hold::Zoh { fs_hz: fs })
         }
         _ => None,
