@@ -70,7 +70,8 @@ pub struct PipelineConfig {
     /// Modes to start from. Default: every CMIF peak.
     pub modes: ModeSelection,
     /// A hold the user declares (`zoh:FS` or `sinc:FS`): modelled from the start, not a
-    /// discovery. Default: none.
+    /// discovery; `Some(Hold::None)` says there is none (overriding a hold the file's
+    /// comments declare). Default: `None`, take what the file declares.
     pub hold: Option<Hold>,
     /// Delay handling. `None` (the default) means: for `fit`, estimate it and refine it
     /// in the iterations; for `diagnose`, take the delay the file declares (0 when it
@@ -680,8 +681,15 @@ pub fn run(
         adapt: Some(AdaptConfig {
             min_f: cfg.min_f,
             alpha: cfg.alpha,
-            // diagnose: missed modes are found and reported by the loop
-            max_new_per_round: if cfg.diagnose { 0 } else { 6 },
+            // The first fit completes the modes at significant residual peaks, as
+            // `frfit fit` does, unless the user declared the modes to expect
+            // (`--modes N` or frequencies): then a mode beyond them is a discovery of
+            // the diagnosis loop, reported as a step.
+            max_new_per_round: if cfg.diagnose && cfg.modes != ModeSelection::Auto {
+                0
+            } else {
+                6
+            },
             ..Default::default()
         }),
         progress: cfg.progress.clone(),

@@ -10,11 +10,11 @@ use frfit::FrfitError;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::time::Duration;
 
-/// `--hold zoh:FS | sinc:FS | none`.
-pub fn parse_hold(s: &str) -> Result<Option<Hold>, String> {
+/// `--hold zoh:FS | sinc:FS | none` (`none` overrides a hold the file declares).
+pub fn parse_hold(s: &str) -> Result<Hold, String> {
     let s = s.trim();
     if s.eq_ignore_ascii_case("none") {
-        return Ok(None);
+        return Ok(Hold::None);
     }
     let (kind, fs) = s
         .split_once(':')
@@ -27,8 +27,8 @@ pub fn parse_hold(s: &str) -> Result<Option<Hold>, String> {
         return Err(format!("sample rate {fs} in `{s}` must be > 0 Hz"));
     }
     match kind.trim().to_ascii_lowercase().as_str() {
-        "zoh" => Ok(Some(Hold::Zoh { fs_hz: fs })),
-        "sinc" => Ok(Some(Hold::Sinc { fs_hz: fs })),
+        "zoh" => Ok(Hold::Zoh { fs_hz: fs }),
+        "sinc" => Ok(Hold::Sinc { fs_hz: fs }),
         k => Err(format!(
             "unknown hold `{k}`: use zoh:FS_HZ (exact) or sinc:FS_HZ"
         )),
@@ -122,7 +122,7 @@ pub struct FitOptions {
     pub delay: Option<DelayChoice>,
     /// Sampled-measurement hold: `zoh:FS_HZ` (exact zero-order hold), `sinc:FS_HZ`, `none`.
     #[arg(long, value_parser = parse_hold, value_name = "zoh:FS_HZ|none")]
-    pub hold: Option<Option<Hold>>,
+    pub hold: Option<Hold>,
     /// Modes to start from: `auto` (every CMIF peak) or N (the N most prominent).
     #[arg(long, value_parser = parse_modes, value_name = "auto|N")]
     pub modes: Option<ModeSelection>,
@@ -145,7 +145,7 @@ impl FitOptions {
                 .band
                 .map(|b| (b.lo_hz.unwrap_or(0.0), b.hi_hz.unwrap_or(f64::MAX))),
             modes: self.modes.clone().unwrap_or_default(),
-            hold: self.hold.flatten(),
+            hold: self.hold,
             delay: self.delay,
             method: match self.method {
                 Method::Riv => IvMethod::Riv,
