@@ -291,6 +291,31 @@ struct Trial {
     f: f64,
     f_crit: f64,
     added: usize,
+    /// For the joint missed-mode trial: (frequency, damping) of every mode it added,
+    /// each reported as its own `missed_mode` step.
+    joint_modes: Vec<(f64, f64)>,
+}
+
+/// The modes of `after` that are not in `before`: each mode of `before` takes the
+/// nearest unclaimed mode of `after` within 3 %, the rest are new.
+fn new_modes(before: &AdditiveModel, after: &AdditiveModel) -> Vec<(f64, f64)> {
+    let mut left: Vec<(f64, f64)> = after.modes().iter().map(|m| (m.f_hz, m.zeta)).collect();
+    for old in before.modes() {
+        let nearest = left
+            .iter()
+            .enumerate()
+            .filter(|(_, (f, _))| (f / old.f_hz - 1.0).abs() < 0.03)
+            .min_by(|a, b| {
+                (a.1 .0 - old.f_hz)
+                    .abs()
+                    .total_cmp(&(b.1 .0 - old.f_hz).abs())
+            })
+            .map(|(i, _)| i);
+        if let Some(i) = nearest {
+            left.remove(i);
+        }
+    }
+    left
 }
 
 fn effect_name(e: Effect) -> &'static str {
@@ -760,6 +785,67 @@ pub fn run(
             }
             let before = error_stats(&band, &response, &noise);
             let mut trials: Vec<Trial> = Vec::new();
+            let tested_missed_mode_now = cands.iter().any(|c| c.0 == Effect::MissedMode);
+            // Missed modes jointly: close pairs merged into one fitted mode, or several
+            // peaks at once, are resolved by adding a mode at every significant residual
+            // peak and refining, with the local and F tests of the structure adaptation
+            // per mode (what `frfit fit` does); tested as one candidate against the rest.
+            // When it passes its F test, the single-peak candidates it subsumes are
+            // not refitted one by one.
+            if tested_missed_mode_now {
+                let acfg = AdaptConfig {
+                    min_f: cfg.min_f,
+                    alpha: cfg.alpha,
+                    ..Default::default()
+                };
+                n_tests += 1;
+                cfg.progress.step(
+                    "diagnose",
+                    n_tests,
+                    None,
+                    None,
+                    format!("round {}: testing missed modes jointly", n_accepted + 1),
+                );
+                if let Ok((af, rep)) = additive_riv::adapt_modes(current.clone(), &fd, &riv, &acfg)
+                {
+                    let m = af.model;
+                    let c = model_cost(&m, &fd);
+                    let joint = new_modes(&current, &m);
+                    let added = m.n_params().saturating_sub(current.n_params());
+                    if !joint.is_empty() && added > 0 && c < current_cost {
+                        let stats = ResidualStats::new(&m, &fd);
+                        let s2 = noise_scale(c, &fd, m.n_params());
+                        let f = f_statistic(current_cost - c, added, s2);
+                        let p_eff = stats.effective_params(added, fd.m());
+                        let f_crit = (chi2_upper(p_eff, cfg.alpha) / p_eff).max(cfg.min_f);
+                        let list: Vec<String> =
+                            joint.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
+                        let evidence = format!(
+                            "significant residual peaks; modes added at every peak in {} round(s) of add/drop with the local test per mode (removed on the way: {}): {}",
+                            rep.rounds,
+                            rep.dropped.len(),
+                            list.join(", ")
+                        );
+                        trials.push(Trial {
+                            effect: Effect::MissedMode,
+                            evidence,
+                            params: serde_json::json!({"f_hz": joint[0].0, "zeta": joint[0].1}),
+                            uncertainty: None,
+                            model: m,
+                            cost: c,
+                            f,
+                            f_crit,
+                            added,
+                            joint_modes: joint,
+                        });
+                    }
+                }
+            }
+            let joint_passed = trials.iter().any(|t| t.f > t.f_crit);
+            let cands: Vec<Candidate> = cands
+                .into_iter()
+                .filter(|c| !(joint_passed && c.0 == Effect::MissedMode))
+                .collect();
             for (effect, evidence, params, aug, peak) in cands {
                 n_tests += 1;
                 let key = match effect {
@@ -818,6 +904,7 @@ pub fn run(
                     f,
                     f_crit,
                     added,
+                    joint_modes: Vec::new(),
                 });
             }
             if trials.is_empty() {
@@ -837,20 +924,38 @@ pub fn run(
                 let after_resp = tr.model.response_at(&omega);
                 let after = error_stats(&band, &after_resp, &noise);
                 let accepted = Some(i) == best;
-                steps.push(StepSummary {
-                    effect: effect_name(tr.effect).to_string(),
-                    accepted,
-                    evidence: tr.evidence,
-                    params: tr.params,
-                    uncertainty: tr.uncertainty,
-                    f_statistic: tr.f,
-                    f_critical: tr.f_crit,
-                    added_params: tr.added,
-                    before,
-                    after,
-                    figure: None,
-                });
-                step_responses.push((response.clone(), after_resp.clone()));
+                // a joint missed-mode trial reports each mode it added as a step
+                let per_step: Vec<(serde_json::Value, String)> = if tr.joint_modes.is_empty() {
+                    vec![(tr.params.clone(), tr.evidence.clone())]
+                } else {
+                    let n = tr.joint_modes.len();
+                    tr.joint_modes
+                        .iter()
+                        .enumerate()
+                        .map(|(k, (f, z))| {
+                            (
+                                serde_json::json!({"f_hz": f, "zeta": z}),
+                                format!("mode {} of {n} added together; {}", k + 1, tr.evidence),
+                            )
+                        })
+                        .collect()
+                };
+                for (params, evidence) in per_step {
+                    steps.push(StepSummary {
+                        effect: effect_name(tr.effect).to_string(),
+                        accepted,
+                        evidence,
+                        params,
+                        uncertainty: tr.uncertainty.clone(),
+                        f_statistic: tr.f,
+                        f_critical: tr.f_crit,
+                        added_params: tr.added,
+                        before,
+                        after,
+                        figure: None,
+                    });
+                    step_responses.push((response.clone(), after_resp.clone()));
+                }
                 if accepted {
                     accepted_model = Some((tr.model, tr.cost, after_resp));
                 }
