@@ -1,1 +1,95 @@
-fn main() {}
+//! Developer tasks of the frfit workspace, run as `cargo xtask <task>` (the alias in
+//! `.cargo/config.toml` builds this crate in release).
+//!
+//! - `wafer-stage`: the full reference pipeline without input files: simulate the
+//!   wafer-stage experiment, estimate its FRF, fit and diagnose it with frfit, and
+//!   validate the model against the simulator's truth.
+
+mod validate;
+mod wafer_stage;
+
+use clap::{CommandFactory, Parser, Subcommand};
+use std::fmt;
+use std::process::ExitCode;
+
+/// `cargo xtask`: developer tasks of the frfit workspace.
+#[derive(Parser, Debug)]
+#[command(
+    name = "xtask",
+    bin_name = "cargo xtask",
+    about = "Developer tasks of the frfit workspace",
+    after_help = "Run `cargo xtask <TASK> --help` for the options of a task."
+)]
+struct Cli {
+    #[command(subcommand)]
+    task: Option<Task>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Task {
+    /// Reference pipeline on the simulated wafer stage: simulate, estimate the FRF, fit
+    /// and diagnose, validate against the known truth (no input files needed).
+    WaferStage(wafer_stage::Args),
+}
+
+/// An error of a task: which stage failed and why.
+#[derive(Debug)]
+pub struct Error {
+    stage: String,
+    message: String,
+}
+
+impl Error {
+    /// An error of `stage`.
+    pub fn new(stage: impl Into<String>, message: impl Into<String>) -> Self {
+        Self {
+            stage: stage.into(),
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.stage, self.message)
+    }
+}
+
+/// Attaches the stage name to any displayable error.
+pub trait Context<T> {
+    /// Maps the error to an [`Error`] of `stage`.
+    fn stage(self, stage: &str) -> Result<T, Error>;
+}
+
+impl<T, E: fmt::Display> Context<T> for Result<T, E> {
+    fn stage(self, stage: &str) -> Result<T, Error> {
+        self.map_err(|e| Error::new(stage, e.to_string()))
+    }
+}
+
+fn main() -> ExitCode {
+    // faer's own threads are slower than one on 2-core machines (STACK.md); the
+    // simulator and frfit parallelise over experiments and entries with rayon instead.
+    faer::set_global_parallelism(faer::Par::Seq);
+    let cli = Cli::parse();
+    let result = match cli.task {
+        Some(Task::WaferStage(args)) => wafer_stage::run(args),
+        None => {
+            let mut cmd = Cli::command();
+            match cmd.print_help() {
+                Ok(()) => {
+                    println!();
+                    return ExitCode::SUCCESS;
+                }
+                Err(e) => Err(Error::new("help", e.to_string())),
+            }
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
