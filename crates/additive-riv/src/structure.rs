@@ -452,8 +452,24 @@ pub fn adapt_modes(
             break;
         }
         changed |= !added.is_empty();
-        fit_numerators(&mut model, data)?;
-        let mut refit = iterate(model, data, &coarse)?;
+        // A round whose new modes make the problem singular (a peak of a residual at
+        // rounding level, a mode on top of another) is undone, not an error of the fit.
+        let attempt = fit_numerators(&mut model, data).and_then(|_| iterate(model, data, &coarse));
+        let mut refit = match attempt {
+            Ok(f) => f,
+            Err(RivError::Numerical { why, .. }) => {
+                report.dropped.push((
+                    f64::NAN,
+                    format!(
+                        "round {} undone: the added modes made the fit singular ({why})",
+                        round + 1
+                    ),
+                ));
+                fit = previous;
+                break;
+            }
+            Err(e) => return Err(e),
+        };
         report.refinements.push(refit.iterations);
         total_iterations += refit.iterations;
         history.extend_from_slice(&refit.cost_history);

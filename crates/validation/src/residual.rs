@@ -96,6 +96,11 @@ pub struct ResidualConfig {
     /// that the calibration accepts as noise; a median line above it is a broadband
     /// misfit. Default 1.5.
     pub max_noise_scale: f64,
+    /// Smallest `kappa` the calibration uses: a residual far below the stated noise
+    /// (a noise-free simulation, an overestimated variance) is calibrated at this
+    /// fraction of it, so that its rounding-level structure is not called significant.
+    /// Default 0.25.
+    pub min_noise_scale: f64,
     /// The local level `L_k` of the per-line statistic is its running median over
     /// `+-local_half_window` lines or `+-local_rel * f_k`, whichever is wider. Default
     /// 25 lines.
@@ -145,6 +150,7 @@ impl Default for ResidualConfig {
             alpha: 0.01,
             min_excess: 0.05,
             max_noise_scale: 1.5,
+            min_noise_scale: 0.25,
             local_half_window: 25,
             local_rel: 0.1,
             peak_over_local: 4.0,
@@ -166,6 +172,9 @@ impl ResidualConfig {
         }
         if !(self.min_excess >= 0.0 && self.min_excess.is_finite()) {
             return bad("min_excess", self.min_excess, "must be finite and >= 0");
+        }
+        if !(self.min_noise_scale > 0.0 && self.min_noise_scale <= 1.0) {
+            return bad("min_noise_scale", self.min_noise_scale, "must be in (0, 1]");
         }
         if !(self.max_noise_scale >= 1.0 && self.max_noise_scale.is_finite()) {
             return bad(
@@ -773,6 +782,8 @@ fn calibrate(
     let capped = kappa > cfg.max_noise_scale;
     let c = if capped {
         cfg.max_noise_scale * m as f64 / nu
+    } else if kappa < cfg.min_noise_scale {
+        cfg.min_noise_scale * m as f64 / nu
     } else {
         c0
     };
