@@ -63,11 +63,13 @@ fn fewer_lines_than_parameters() {
     let f0 = case.mode_f[0];
     let band = data.band(f0 - 0.4, f0 + 0.4).unwrap();
     assert_eq!(band.n_lines(), 1);
-    let mut cfg = FitterConfig::default();
-    cfg.modes = ModeSelection::Frequencies(vec![band.freq_hz(0)]);
-    cfg.delay = DelayChoice::None;
-    cfg.rigid_body = RigidBody::Integrators(2);
-    cfg.adapt = None;
+    let cfg = FitterConfig {
+        modes: ModeSelection::Frequencies(vec![band.freq_hz(0)]),
+        delay: DelayChoice::None,
+        rigid_body: RigidBody::Integrators(2),
+        adapt: None,
+        ..Default::default()
+    };
     let err = AdditiveFitter::new(cfg).fit(&band).unwrap_err();
     let msg = err.to_string();
     assert!(
@@ -99,8 +101,10 @@ fn non_finite_value_is_named() {
 #[test]
 fn requested_mode_outside_band() {
     let (_case, data) = small_case();
-    let mut cfg = FitterConfig::default();
-    cfg.modes = ModeSelection::Frequencies(vec![100.0, 5000.0]);
+    let cfg = FitterConfig {
+        modes: ModeSelection::Frequencies(vec![100.0, 5000.0]),
+        ..Default::default()
+    };
     let err = AdditiveFitter::new(cfg).fit(&data).unwrap_err();
     match &err {
         RivError::ModeOutsideBand { f_hz, .. } => assert_eq!(*f_hz, 5000.0),

@@ -69,8 +69,10 @@ fn wafer_nominal_delay_compensated_inverse_magnitude() {
     let data = read_frf_csv(&data).unwrap();
     let truth = Truth::read(&truth).unwrap();
     let band = data.band(20.0, 2000.0).unwrap();
-    let mut cfg = FitterConfig::default();
-    cfg.delay = DelayChoice::Fixed { seconds: 150e-6 };
+    let mut cfg = FitterConfig {
+        delay: DelayChoice::Fixed { seconds: 150e-6 },
+        ..Default::default()
+    };
     cfg.riv.weighting = Weighting::InverseMagnitude;
     let (fit, _report) = AdditiveFitter::new(cfg).fit(&band).unwrap();
     let (df, dz, matched, n_fitted) = mode_errors(&fit.model, &truth, 1e-3);
@@ -105,8 +107,10 @@ fn wafer_nominal_exact_hold_reaches_the_reference() {
     let clean = read_frf_csv(&clean).unwrap();
     let truth = Truth::read(&truth).unwrap();
     let band = data.band(20.0, 2000.0).unwrap();
-    let mut cfg = FitterConfig::default();
-    cfg.hold = Hold::Zoh { fs_hz: 10_000.0 };
+    let cfg = FitterConfig {
+        hold: Hold::Zoh { fs_hz: 10_000.0 },
+        ..Default::default()
+    };
     let (fit, _report) = AdditiveFitter::new(cfg).fit(&band).unwrap();
     let (median, p95) = rel_error_quantiles(&fit.model, &clean.band(20.0, 2000.0).unwrap());
     let (df, dz, matched, n_fitted) = mode_errors(&fit.model, &truth, 2e-4);
