@@ -916,7 +916,12 @@ pub fn run(
             let best = trials
                 .iter()
                 .enumerate()
-                .filter(|(_, tr)| tr.f > tr.f_crit && tr.cost < current_cost)
+                .filter(|(_, tr)| {
+                    // an effect that leaves a pole in the right half-plane is not a fix
+                    tr.f > tr.f_crit
+                        && tr.cost < current_cost
+                        && tr.model.unstable_submodels().len() <= current.unstable_submodels().len()
+                })
                 .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
                 .map(|(i, _)| i);
             let mut accepted_model = None;
@@ -961,17 +966,35 @@ pub fn run(
                 }
             }
             match accepted_model {
-                Some((mut m, _, _)) => {
+                Some((accepted_m, accepted_cost, _)) => {
                     n_accepted += 1;
                     // modes that the new structure made redundant go (duplicates,
-                    // unstable, insignificant), then the numerators are refitted
+                    // unstable, insignificant), then the numerators are refitted; a
+                    // pruning that costs significantly (F test of the removed
+                    // parameters) is not kept
+                    let mut m = accepted_m.clone();
                     let pruned = additive_riv::structure::prune_modes(&mut m, &fd, &prune_cfg)
                         .map_err(err("prune"))?;
-                    for (f, why) in pruned {
-                        fit.messages.push(format!(
-                            "after step {}: removed mode at {f:.2} Hz: {why}",
-                            steps.len()
-                        ));
+                    if !pruned.is_empty() {
+                        let removed = accepted_m.n_params().saturating_sub(m.n_params()).max(1);
+                        let s2 = noise_scale(accepted_cost, &fd, accepted_m.n_params());
+                        let f_removed =
+                            f_statistic(model_cost(&m, &fd) - accepted_cost, removed, s2);
+                        if f_removed > cfg.min_f {
+                            fit.messages.push(format!(
+                                "after step {}: kept {} mode(s) the pruning would remove (their removal raises the cost significantly, F = {f_removed:.1})",
+                                steps.len(),
+                                pruned.len()
+                            ));
+                            m = accepted_m;
+                        } else {
+                            for (f, why) in pruned {
+                                fit.messages.push(format!(
+                                    "after step {}: removed mode at {f:.2} Hz: {why}",
+                                    steps.len()
+                                ));
+                            }
+                        }
                     }
                     current_cost = model_cost(&m, &fd);
                     response = m.response_at(&omega);
@@ -989,9 +1012,19 @@ pub fn run(
             ..Default::default()
         };
         let last = iterate(current, &fd, &full).map_err(err("final refinement"))?;
-        let msgs = std::mem::take(&mut fit.messages);
-        fit = last;
-        fit.messages = msgs;
+        let mut msgs = std::mem::take(&mut fit.messages);
+        // the loop never ends worse than it started
+        let initial_cost = model_cost(&initial_model, &fd);
+        if model_cost(&last.model, &fd) > initial_cost {
+            msgs.push(format!(
+                "the diagnosed model fits worse than the first model (cost {:.4e} > {initial_cost:.4e}); the first model is kept",
+                model_cost(&last.model, &fd)
+            ));
+            fit.messages = msgs;
+        } else {
+            fit = last;
+            fit.messages = msgs;
+        }
         stage("diagnose", t);
     }
     let final_response = fit.model.response_at(&omega);
