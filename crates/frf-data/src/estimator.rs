@@ -127,7 +127,7 @@ impl<M> From<M> for Fit<M> {
 /// Initialisers use `Start = ()`; refiners use `Start = Fit<M>` (or anything a `Fit`
 /// converts into), so that chaining reads as a pipeline without conversion code:
 ///
-/// ```ignore
+/// ```text
 /// let init = CmifInit::default().estimate(&data, ())?;
 /// let fit = AdditiveRiv::default().estimate(&data, init)?;
 /// ```

@@ -514,14 +514,20 @@ fn degenerate_inputs_do_not_panic() {
     cleanup(&dir);
 }
 
-/// The wafer-stage truth against the nominal data, to look at (ignored: needs the shared
-/// data).
+/// The wafer-stage truth against the nominal data: the report of a full-size case
+/// (4 x 13, 4000 lines) is complete. Set `FRFIT_REPORT_DIR` to keep it and look at it.
+/// Skipped, with a message, without `../shared/data`.
 #[test]
-#[ignore]
 fn wafer_report() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    let data = frf_data::io::read_frf_csv(root.join("wafer_nominal.csv")).unwrap();
-    let truth = frf_data::truth::Truth::read(root.join("wafer_nominal.truth.json")).unwrap();
+    let test = "wafer_report";
+    let (Some(data_path), Some(truth_path)) = (
+        frf_data::shared_data::require(test, "wafer_nominal.csv"),
+        frf_data::shared_data::require(test, "wafer_nominal.truth.json"),
+    ) else {
+        return;
+    };
+    let data = frf_data::io::read_frf_csv(data_path).unwrap();
+    let truth = frf_data::truth::Truth::read(truth_path).unwrap();
     let model = truth.modal_model().unwrap();
     let w = omega(data.freq_hz_slice());
     let fin = model.zoh_response(&w, 1e-4, 1.0).unwrap();
@@ -570,4 +576,10 @@ fn wafer_report() {
         t.elapsed().as_secs_f64() * 1e3
     );
     check_files(&dir, &files);
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    assert!(md.contains("hold"), "the step table names the effect");
+    assert!(files.iter().any(|f| f.ends_with("bode_grid.svg")));
+    if std::env::var_os("FRFIT_REPORT_DIR").is_none() {
+        cleanup(&dir);
+    }
 }
