@@ -1022,7 +1022,11 @@ pub fn run(
             ));
             fit.messages = msgs;
         } else {
+            // iterations of the first fit and of the final refinement (the refits of
+            // the candidates are reported per step)
+            let first = fit.iterations;
             fit = last;
+            fit.iterations += first;
             fit.messages = msgs;
         }
         stage("diagnose", t);

@@ -81,6 +81,21 @@ pub struct ReportInput<'a> {
     pub title: &'a str,
 }
 
+/// Removes the per-step figures (`step_*.svg`) an earlier report left in `dir`, so that
+/// a rerun with fewer steps does not leave figures of steps that no longer exist.
+fn remove_stale_step_figures(dir: &Path) -> Result<(), FrfitError> {
+    let entries = std::fs::read_dir(dir).map_err(|e| FrfitError::io(dir, e))?;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with("step_") && name.ends_with(".svg") {
+            let path = entry.path();
+            std::fs::remove_file(&path).map_err(|e| FrfitError::io(&path, e))?;
+        }
+    }
+    Ok(())
+}
+
 /// Writes the report into `dir` (created if needed): `summary.json`, the figures and
 /// `report.md` (see the [module documentation](self)); returns the paths written, in
 /// that order.
@@ -98,6 +113,7 @@ pub fn write_report(
 ) -> Result<Vec<PathBuf>, FrfitError> {
     check_input(input, summary)?;
     std::fs::create_dir_all(dir).map_err(|e| FrfitError::io(dir, e))?;
+    remove_stale_step_figures(dir)?;
     let mut written = Vec::new();
 
     let mut summary = summary.clone();

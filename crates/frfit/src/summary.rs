@@ -136,7 +136,8 @@ pub struct FinalModelSummary {
     pub feedthrough: bool,
     /// Dynamics factors (`input 3: pole -1234 rad/s`, ...).
     pub dynamics: Vec<String>,
-    /// Iterations of the last refinement.
+    /// Iterations of Algorithm 1: of the fit, or for `diagnose` of the first fit and
+    /// the final refinement together.
     pub iterations: usize,
     /// How the last refinement stopped.
     pub convergence: String,
