@@ -463,8 +463,10 @@ impl Basis {
 }
 
 /// Per-entry work arrays over the lines: the divided data `y = G / F`, the scale
-/// `s = sqrt(w) |F|` of the divided problem (`w |G - F P|^2 = s^2 |y - P|^2`), and the
-/// submodel responses `P_i` with their sum.
+/// `s = sqrt(w) |F|` of the divided problem (`w |G - F P|^2 = s^2 |y - P|^2`), the
+/// residual `E = y - sum_i P_i`, and the sum of the submodels that bypass the known
+/// factor (the only per-submodel response the step needs; keeping every `P_i` would
+/// make this fill bound by memory traffic).
 #[derive(Default)]
 pub struct EntryLines {
     /// `Re y`.
@@ -473,10 +475,11 @@ pub struct EntryLines {
     pub y_im: Vec<f64>,
     /// `s = sqrt(w) |F|`.
     pub s: Vec<f64>,
-    /// `Re P_i(k)` at `[i * n + k]`.
-    pub p_re: Vec<f64>,
-    /// `Im P_i(k)` at `[i * n + k]`.
-    pub p_im: Vec<f64>,
+    /// `Re sum_b P_b(k)` over the submodels `b` that bypass the known factor (empty
+    /// when none does).
+    pub pb_re: Vec<f64>,
+    /// `Im sum_b P_b(k)`.
+    pub pb_im: Vec<f64>,
     /// `Re E = Re (y - sum_i P_i)`.
     pub e_re: Vec<f64>,
     /// `Im E`.
@@ -485,7 +488,8 @@ pub struct EntryLines {
 
 impl EntryLines {
     /// Fills the arrays for entry `e` with numerators `be` (this entry's block of `eta`).
-    /// `groups` lists `(first numerator index, count)` per submodel.
+    /// `groups` lists `(first numerator index, count)` per submodel. The loops are
+    /// compiled for the CPU's SIMD instruction set at run time (`pulp` dispatch).
     pub fn fill(
         &mut self,
         e: usize,
@@ -494,44 +498,88 @@ impl EntryLines {
         groups: &[(usize, usize)],
         be: &[f64],
     ) {
+        /// The arguments, so that `with_simd` (inlined into pulp's `target_feature`
+        /// function) runs the kernel with the CPU's instruction set.
+        struct Op<'a> {
+            el: &'a mut EntryLines,
+            e: usize,
+            data: &'a FitData,
+            basis: &'a Basis,
+            groups: &'a [(usize, usize)],
+            be: &'a [f64],
+        }
+        impl pulp::WithSimd for Op<'_> {
+            type Output = ();
+            #[inline(always)]
+            fn with_simd<S: pulp::Simd>(self, _simd: S) {
+                self.el
+                    .fill_kernel(self.e, self.data, self.basis, self.groups, self.be)
+            }
+        }
+        pulp::Arch::new().dispatch(Op {
+            el: self,
+            e,
+            data,
+            basis,
+            groups,
+            be,
+        })
+    }
+
+    #[inline(always)]
+    fn fill_kernel(
+        &mut self,
+        e: usize,
+        data: &FitData,
+        basis: &Basis,
+        groups: &[(usize, usize)],
+        be: &[f64],
+    ) {
         let n = data.n;
-        let k_sub = groups.len();
+        let any_bypass = basis.bypass.iter().any(|&b| b);
         self.y_re.resize(n, 0.0);
         self.y_im.resize(n, 0.0);
         self.s.resize(n, 0.0);
-        self.p_re.clear();
-        self.p_re.resize(k_sub * n, 0.0);
-        self.p_im.clear();
-        self.p_im.resize(k_sub * n, 0.0);
+        self.pb_re.clear();
+        self.pb_re.resize(if any_bypass { n } else { 0 }, 0.0);
+        self.pb_im.clear();
+        self.pb_im.resize(self.pb_re.len(), 0.0);
         self.e_re.resize(n, 0.0);
         self.e_im.resize(n, 0.0);
-        let gr = &data.g_re[e * n..(e + 1) * n];
-        let gi = &data.g_im[e * n..(e + 1) * n];
-        let sw = &data.sqrt_w[e * n..(e + 1) * n];
-        let fi = &basis.f_inv[e * n..(e + 1) * n];
-        let fa = &basis.f_abs[e * n..(e + 1) * n];
-        for k in 0..n {
-            self.y_re[k] = gr[k] * fi[k].re - gi[k] * fi[k].im;
-            self.y_im[k] = gr[k] * fi[k].im + gi[k] * fi[k].re;
-            self.s[k] = sw[k] * fa[k];
+        // slices cut to exactly `n`: no bounds checks, vectorised loops
+        let gr = &data.g_re[e * n..][..n];
+        let gi = &data.g_im[e * n..][..n];
+        let sw = &data.sqrt_w[e * n..][..n];
+        let fi = &basis.f_inv[e * n..][..n];
+        let fa = &basis.f_abs[e * n..][..n];
+        {
+            let (yr, yi, s) = (&mut self.y_re[..n], &mut self.y_im[..n], &mut self.s[..n]);
+            for k in 0..n {
+                yr[k] = gr[k] * fi[k].re - gi[k] * fi[k].im;
+                yi[k] = gr[k] * fi[k].im + gi[k] * fi[k].re;
+                s[k] = sw[k] * fa[k];
+            }
         }
         self.e_re.copy_from_slice(&self.y_re);
         self.e_im.copy_from_slice(&self.y_im);
+        let (er, ei) = (&mut self.e_re[..n], &mut self.e_im[..n]);
         for (i, &(off, cnt)) in groups.iter().enumerate() {
-            let pr = &mut self.p_re[i * n..(i + 1) * n];
-            let pi = &mut self.p_im[i * n..(i + 1) * n];
+            let bypass = basis.bypass.get(i).copied().unwrap_or(false);
             for j in off..off + cnt {
                 let b = be[j];
-                let ur = &basis.u_re[j * n..(j + 1) * n];
-                let ui = &basis.u_im[j * n..(j + 1) * n];
+                let ur = &basis.u_re[j * n..][..n];
+                let ui = &basis.u_im[j * n..][..n];
                 for k in 0..n {
-                    pr[k] += b * ur[k];
-                    pi[k] += b * ui[k];
+                    er[k] -= b * ur[k];
+                    ei[k] -= b * ui[k];
                 }
-            }
-            for k in 0..n {
-                self.e_re[k] -= pr[k];
-                self.e_im[k] -= pi[k];
+                if bypass {
+                    let (pr, pi) = (&mut self.pb_re[..n], &mut self.pb_im[..n]);
+                    for k in 0..n {
+                        pr[k] += b * ur[k];
+                        pi[k] += b * ui[k];
+                    }
+                }
             }
         }
     }

@@ -66,12 +66,81 @@ pub struct StepUpdate {
 }
 
 /// Fills the real instrument `Y = [U | V_hat]` and regressor `X = [U | V | eps]` of
-/// entry `e` (rows `k`: real parts of line `k`; rows `n + k`: imaginary parts; every
-/// row scaled by `s = sqrt(w) |F|`), column by column so that each loop runs over
-/// contiguous lines. `y` and `x` must be `2n x (nn + ns)` and `2n x (nn + ns + 1)`;
-/// `el` holds the entry's lines after [`EntryLines::fill`].
+/// entry `e` for the lines `lines = k0..k1` (rows `k - k0`: real parts of line `k`;
+/// rows `len + k - k0`: imaginary parts, `len = k1 - k0`; every row scaled by
+/// `s = sqrt(w) |F|`), column by column so that each loop runs over contiguous lines.
+/// `y` and `x` need at least `2 len` rows and `nn + ns` and `nn + ns + 1` columns; `el`
+/// holds the entry's lines after [`EntryLines::fill`]. The step fills a block of lines
+/// at a time and accumulates `Y^T X` over the blocks, so that the blocks stay in cache.
+///
+/// The loops are compiled for the SIMD instruction set of the CPU at run time
+/// (`pulp` dispatch: AVX2 or AVX-512 where present, the baseline otherwise).
 fn fill_entry(
     e: usize,
+    lines: std::ops::Range<usize>,
+    data: &FitData,
+    lay: &Layout,
+    den_groups: &[(usize, usize)],
+    basis: &Basis,
+    el: &EntryLines,
+    method: IvMethod,
+    be: &[f64],
+    y: &mut Mat<f64>,
+    x: &mut Mat<f64>,
+) {
+    /// The arguments, so that `with_simd` (inlined into pulp's `target_feature`
+    /// function) runs the kernel with the CPU's instruction set.
+    struct Op<'a> {
+        e: usize,
+        lines: std::ops::Range<usize>,
+        data: &'a FitData,
+        lay: &'a Layout,
+        den_groups: &'a [(usize, usize)],
+        basis: &'a Basis,
+        el: &'a EntryLines,
+        method: IvMethod,
+        be: &'a [f64],
+        y: &'a mut Mat<f64>,
+        x: &'a mut Mat<f64>,
+    }
+    impl pulp::WithSimd for Op<'_> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) {
+            fill_entry_kernel(
+                self.e,
+                self.lines,
+                self.data,
+                self.lay,
+                self.den_groups,
+                self.basis,
+                self.el,
+                self.method,
+                self.be,
+                self.y,
+                self.x,
+            )
+        }
+    }
+    pulp::Arch::new().dispatch(Op {
+        e,
+        lines,
+        data,
+        lay,
+        den_groups,
+        basis,
+        el,
+        method,
+        be,
+        y,
+        x,
+    })
+}
+
+#[inline(always)]
+fn fill_entry_kernel(
+    e: usize,
+    lines: std::ops::Range<usize>,
     data: &FitData,
     lay: &Layout,
     den_groups: &[(usize, usize)],
@@ -83,59 +152,66 @@ fn fill_entry(
     x: &mut Mat<f64>,
 ) {
     let n = data.n;
+    let (k0, k1) = (lines.start, lines.end);
+    let len = k1 - k0;
     let nn = lay.n_num;
     let nd = lay.n_den;
     let ns = lay.n_shared();
-    let s = &el.s;
+    // every per-line slice is cut to exactly `len`: the loops below carry no bounds
+    // checks and vectorise (they are most of the time of an iteration)
+    let at = |v: &'_ [f64], j: usize| -> std::ops::Range<usize> {
+        debug_assert!(v.len() >= (j + 1) * n);
+        j * n + k0..j * n + k1
+    };
+    let s = &el.s[k0..k1];
+    let (e_re, e_im) = (&el.e_re[k0..k1], &el.e_im[k0..k1]);
+    let (y_re, y_im) = (&el.y_re[k0..k1], &el.y_im[k0..k1]);
     // numerator columns: u * s (instrument = regressor)
     for j in 0..nn {
-        let ur = &basis.u_re[j * n..(j + 1) * n];
-        let ui = &basis.u_im[j * n..(j + 1) * n];
-        let col = y.col_as_slice_mut(j);
-        let (cr, ci) = col.split_at_mut(n);
-        for k in 0..n {
+        let ur = &basis.u_re[at(&basis.u_re, j)];
+        let ui = &basis.u_im[at(&basis.u_im, j)];
+        let (cr, ci) = y.col_as_slice_mut(j)[..2 * len].split_at_mut(len);
+        for k in 0..len {
             cr[k] = ur[k] * s[k];
             ci[k] = ui[k] * s[k];
         }
-        x.col_as_slice_mut(j).copy_from_slice(y.col_as_slice(j));
+        x.col_as_slice_mut(j)[..2 * len].copy_from_slice(&y.col_as_slice(j)[..2 * len]);
     }
     // denominator columns: the instrument is d P_i / d a = sum_j B_j d u_j / d a (the
     // gradient (12)); the regressor (14) adds d * E (it uses E + P_i where the
     // instrument uses P_i). SK uses the regressor for both (Remark 1).
-    let mut inst = vec![0.0; 2 * n];
     for (d0, cnt) in den_groups.iter().copied() {
         for d in d0..d0 + cnt {
-            let dr = &basis.d_re[d * n..(d + 1) * n];
-            let di = &basis.d_im[d * n..(d + 1) * n];
-            inst.fill(0.0);
+            let dr = &basis.d_re[at(&basis.d_re, d)];
+            let di = &basis.d_im[at(&basis.d_im, d)];
             {
-                let (ir, ii) = inst.split_at_mut(n);
+                let (ir, ii) = y.col_as_slice_mut(nn + d)[..2 * len].split_at_mut(len);
+                ir.fill(0.0);
+                ii.fill(0.0);
                 for p in basis.pair_range[d].clone() {
                     let b = be[basis.pairs[p].1];
-                    let ur = &basis.du_re[p * n..(p + 1) * n];
-                    let ui = &basis.du_im[p * n..(p + 1) * n];
-                    for k in 0..n {
+                    let ur = &basis.du_re[at(&basis.du_re, p)];
+                    let ui = &basis.du_im[at(&basis.du_im, p)];
+                    for k in 0..len {
                         ir[k] += b * ur[k] * s[k];
                         ii[k] += b * ui[k] * s[k];
                     }
                 }
             }
-            let (ir, ii) = inst.split_at(n);
             {
-                let col = x.col_as_slice_mut(nn + d);
-                let (cr, ci) = col.split_at_mut(n);
-                for k in 0..n {
-                    let er = el.e_re[k] * s[k];
-                    let ei = el.e_im[k] * s[k];
+                let (ir, ii) = y.col_as_slice(nn + d)[..2 * len].split_at(len);
+                let (cr, ci) = x.col_as_slice_mut(nn + d)[..2 * len].split_at_mut(len);
+                for k in 0..len {
+                    let er = e_re[k] * s[k];
+                    let ei = e_im[k] * s[k];
                     cr[k] = ir[k] + dr[k] * er - di[k] * ei;
                     ci[k] = ii[k] + dr[k] * ei + di[k] * er;
                 }
             }
             if method == IvMethod::Sk {
-                let xc = x.col_as_slice(nn + d);
-                inst.copy_from_slice(xc);
+                y.col_as_slice_mut(nn + d)[..2 * len]
+                    .copy_from_slice(&x.col_as_slice(nn + d)[..2 * len]);
             }
-            y.col_as_slice_mut(nn + d).copy_from_slice(&inst);
         }
     }
     // factor parameters (delay, dynamics): d(y - P)/d theta = -y d ln F / d theta, so
@@ -144,28 +220,21 @@ fn fill_entry(
     let n_fp = ns - nd;
     // submodels that bypass the known factor depend on the delay as well: their part
     // of the divided model moves with y (d(P_b)/d tau = -P_b d ln F)
-    let mut pb_re = vec![0.0; if lay.fit_delay { n } else { 0 }];
-    let mut pb_im = vec![0.0; pb_re.len()];
-    if lay.fit_delay {
-        for (i, &b) in basis.bypass.iter().enumerate() {
-            if b {
-                for k in 0..n {
-                    pb_re[k] += el.p_re[i * n + k];
-                    pb_im[k] += el.p_im[i * n + k];
-                }
-            }
-        }
-    }
+    let zeros = vec![0.0; if el.pb_re.is_empty() { len } else { 0 }];
+    let (pb_re, pb_im) = if el.pb_re.is_empty() {
+        (&zeros[..], &zeros[..])
+    } else {
+        (&el.pb_re[k0..k1], &el.pb_im[k0..k1])
+    };
     for q in 0..n_fp {
         let on = basis.dlnf_mask[q * m + e];
-        let dl = &basis.dlnf[q * n..(q + 1) * n];
+        let dl = &basis.dlnf[q * n + k0..q * n + k1];
         let is_delay = lay.fit_delay && q == 0;
         {
-            let col = x.col_as_slice_mut(nn + nd + q);
-            let (cr, ci) = col.split_at_mut(n);
-            for k in 0..n {
+            let (cr, ci) = x.col_as_slice_mut(nn + nd + q)[..2 * len].split_at_mut(len);
+            for k in 0..len {
                 if on {
-                    let (mut yr, mut yi) = (el.y_re[k], el.y_im[k]);
+                    let (mut yr, mut yi) = (y_re[k], y_im[k]);
                     if is_delay {
                         yr -= pb_re[k];
                         yi -= pb_im[k];
@@ -179,14 +248,13 @@ fn fill_entry(
                 }
             }
         }
-        let col = y.col_as_slice_mut(nn + nd + q);
-        let (cr, ci) = col.split_at_mut(n);
-        for k in 0..n {
+        let (cr, ci) = y.col_as_slice_mut(nn + nd + q)[..2 * len].split_at_mut(len);
+        for k in 0..len {
             if on {
                 let (mut pr, mut pi) = if method == IvMethod::Riv {
-                    (el.y_re[k] - el.e_re[k], el.y_im[k] - el.e_im[k])
+                    (y_re[k] - e_re[k], y_im[k] - e_im[k])
                 } else {
-                    (el.y_re[k], el.y_im[k])
+                    (y_re[k], y_im[k])
                 };
                 if is_delay {
                     pr -= pb_re[k];
@@ -201,11 +269,10 @@ fn fill_entry(
             }
         }
     }
-    let col = x.col_as_slice_mut(nn + ns);
-    let (cr, ci) = col.split_at_mut(n);
-    for k in 0..n {
-        cr[k] = el.e_re[k] * s[k];
-        ci[k] = el.e_im[k] * s[k];
+    let (cr, ci) = x.col_as_slice_mut(nn + ns)[..2 * len].split_at_mut(len);
+    for k in 0..len {
+        cr[k] = e_re[k] * s[k];
+        ci[k] = e_im[k] * s[k];
     }
 }
 
@@ -258,6 +325,11 @@ pub fn step(
     }
 }
 
+/// Lines per block of the structured step: `2 LINE_BLOCK x (nn + ns)` doubles per
+/// matrix stay in the L2 cache for the wafer stage (about 60 columns), where filling
+/// the whole `2n`-row matrices first and multiplying them after is bound by memory.
+const LINE_BLOCK: usize = 256;
+
 fn step_structured(
     data: &FitData,
     lay: &Layout,
@@ -278,27 +350,33 @@ fn step_structured(
      -> Result<EntryParts, RivError> {
         let (y, x, z, el) = bufs;
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        fill_entry(
-            e,
-            data,
-            lay,
-            &dg,
-            basis,
-            el,
-            method,
-            &eta[e * nn..(e + 1) * nn],
-            y,
-            x,
-        );
-        // Z = Y^T X : (nn + ns) x (nn + ns + 1)
-        matmul(
-            z.as_mut(),
-            Accum::Replace,
-            y.transpose(),
-            x.as_ref(),
-            1.0,
-            Par::Seq,
-        );
+        // Z = Y^T X : (nn + ns) x (nn + ns + 1), accumulated over blocks of lines
+        // that stay in cache
+        for (b, k0) in (0..n).step_by(LINE_BLOCK).enumerate() {
+            let k1 = (k0 + LINE_BLOCK).min(n);
+            let rows = 2 * (k1 - k0);
+            fill_entry(
+                e,
+                k0..k1,
+                data,
+                lay,
+                &dg,
+                basis,
+                el,
+                method,
+                &eta[e * nn..(e + 1) * nn],
+                y,
+                x,
+            );
+            matmul(
+                z.as_mut(),
+                if b == 0 { Accum::Replace } else { Accum::Add },
+                y.as_ref().subrows(0, rows).transpose(),
+                x.as_ref().subrows(0, rows),
+                1.0,
+                Par::Seq,
+            );
+        }
         let mut h_nn = vec![0.0; nn * nn];
         for j in 0..nn {
             for i in 0..nn {
@@ -356,8 +434,8 @@ fn step_structured(
     };
     let init = || {
         (
-            Mat::<f64>::zeros(2 * n, nn + ns),
-            Mat::<f64>::zeros(2 * n, nn + ns + 1),
+            Mat::<f64>::zeros(2 * LINE_BLOCK.min(n), nn + ns),
+            Mat::<f64>::zeros(2 * LINE_BLOCK.min(n), nn + ns + 1),
             Mat::<f64>::zeros(nn + ns, nn + ns + 1),
             EntryLines::default(),
         )
@@ -443,6 +521,7 @@ fn step_dense(
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
         fill_entry(
             e,
+            0..n,
             data,
             lay,
             &dg,

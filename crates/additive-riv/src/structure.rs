@@ -33,7 +33,8 @@ pub struct AdaptConfig {
     /// Damping of an added mode. Default: 0.01.
     pub zeta0: f64,
     /// Relative parameter tolerance of the refinements between structure changes (the
-    /// last refinement uses the full tolerance of the RIV settings). Default: 1e-6.
+    /// last refinement uses the full tolerance of the RIV settings). Default: 1e-4: the
+    /// add/drop tests need the poles settled to a fraction of a bandwidth, not more.
     pub coarse_tol: f64,
     /// Iteration limit of the refinements between structure changes. Default: 15.
     pub coarse_max_iterations: usize,
@@ -66,7 +67,7 @@ impl Default for AdaptConfig {
             min_f: 25.0,
             max_local_ratio: 0.25,
             local_window: 0.01,
-            coarse_tol: 1e-6,
+            coarse_tol: 1e-4,
             coarse_max_iterations: 15,
             band_margin: 1.25,
         }
