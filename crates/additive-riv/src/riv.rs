@@ -318,7 +318,11 @@ fn iterate_core(
             it,
             Some(cfg.max_iterations),
             Some(c * norm),
-            format!("relative change {rel:.2e}"),
+            if alpha < 1.0 {
+                format!("relative change {rel:.2e} (step {alpha:.3e} of the full update)")
+            } else {
+                format!("relative change {rel:.2e}")
+            },
         );
         if rel < cfg.param_tol {
             convergence = Convergence::ParameterTolerance {

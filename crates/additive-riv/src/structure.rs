@@ -54,6 +54,11 @@ pub struct AdaptConfig {
     /// Modes may sit this factor outside the band (a mode just above the band still
     /// shapes its edge); beyond it they are removed. Default: 1.25.
     pub band_margin: f64,
+    /// A residual peak is a mode candidate only when it rises this factor above its
+    /// local median (within +-10 % in frequency). Default: [`PEAK_OVER_LOCAL`] (10);
+    /// the diagnosis loop uses 5 after a broadband effect was added, where the misfit
+    /// of several missing modes raises each other's local level.
+    pub peak_over_local: f64,
 }
 
 impl Default for AdaptConfig {
@@ -70,6 +75,7 @@ impl Default for AdaptConfig {
             coarse_tol: 1e-4,
             coarse_max_iterations: 15,
             band_margin: 1.25,
+            peak_over_local: PEAK_OVER_LOCAL,
         }
     }
 }
@@ -194,6 +200,18 @@ pub fn residual_peaks(
     alpha: f64,
     min_separation: f64,
 ) -> Vec<(f64, f64)> {
+    residual_peaks_over(stats, data, alpha, min_separation, PEAK_OVER_LOCAL)
+}
+
+/// [`residual_peaks`] with the factor over the local median given: `over_local`
+/// instead of [`PEAK_OVER_LOCAL`].
+pub fn residual_peaks_over(
+    stats: &ResidualStats,
+    data: &FitData,
+    alpha: f64,
+    min_separation: f64,
+    over_local: f64,
+) -> Vec<(f64, f64)> {
     let n = data.n;
     let thr = stats.threshold(alpha / n as f64);
     let t = &stats.t;
@@ -210,7 +228,7 @@ pub fn residual_peaks(
         if !is_max {
             continue;
         }
-        let level = thr.max(PEAK_OVER_LOCAL * stats.local_median(&data.omega, k, 0.1));
+        let level = thr.max(over_local * stats.local_median(&data.omega, k, 0.1));
         if t[k] > level {
             peaks.push((f, t[k] / level, t[k]));
         }
@@ -440,10 +458,16 @@ pub fn adapt_modes(
         let first_order = model_first_order(&model);
         let stats = ResidualStats::new(&model, data);
         let mut peak_at = Vec::new();
-        for &(f, _) in residual_peaks(&stats, data, cfg.alpha, cfg.min_separation)
-            .iter()
-            .filter(|(f, _)| *f > lo && *f < hi)
-            .take(cfg.max_new_per_round)
+        for &(f, _) in residual_peaks_over(
+            &stats,
+            data,
+            cfg.alpha,
+            cfg.min_separation,
+            cfg.peak_over_local,
+        )
+        .iter()
+        .filter(|(f, _)| *f > lo && *f < hi)
+        .take(cfg.max_new_per_round)
         {
             model.push_mode(f, cfg.zeta0, first_order)?;
             peak_at.push(f);

@@ -378,6 +378,7 @@ fn candidates(
     fs_hz: Option<f64>,
     alpha: f64,
     tested: &[(Effect, String)],
+    data_delay: Option<f64>,
 ) -> Vec<Candidate> {
     let mut out: Vec<Candidate> = Vec::new();
     let seen = |e: Effect, key: &str| tested.iter().any(|(x, k)| *x == e && k == key);
@@ -415,6 +416,36 @@ fn candidates(
             augment::with_fitted_delay(model, d),
             None,
         ));
+    }
+    // The residual's phase slope is biased when the model is far off (modes fitted
+    // without the delay absorb part of it); the data's own phase slope, from the delay
+    // estimator of frf-data, is a second start for the same effect.
+    if let Some(total) = data_delay {
+        let hold_half = match model.domain() {
+            additive_riv::Domain::ZohDiscrete { ts } => 0.5 * ts,
+            additive_riv::Domain::Continuous => 0.0,
+        };
+        let d = total - hold_half - model.factor.delay_s;
+        let d_trend = an.phase_trend.delay_s;
+        if !model.factor.fit_delay
+            && an.significant
+            && d.abs() > 1e-6
+            && (d - d_trend).abs() > 1e-6
+            && !seen(Effect::Delay, "data")
+        {
+            out.push((
+                Effect::Delay,
+                format!(
+                    "phase slope of the data: {:.2} us in all, {:.2} us beyond the model's delay (the residual's slope says {:.2} us)",
+                    total * 1e6,
+                    d * 1e6,
+                    d_trend * 1e6
+                ),
+                serde_json::json!({"seconds": d, "start": "data"}),
+                augment::with_fitted_delay(model, d),
+                None,
+            ));
+        }
     }
     if let (Some(fs), additive_riv::Domain::Continuous) = (fs_hz, model.domain()) {
         if model.factor.derivative_order == 0 {
@@ -721,6 +752,14 @@ pub fn run(
         ..Default::default()
     };
     let t = Instant::now();
+    let fresh_cfg = FitterConfig {
+        progress: ProgressSink::none(),
+        riv: RivConfig {
+            progress: ProgressSink::none(),
+            ..fitter_cfg.riv.clone()
+        },
+        ..fitter_cfg.clone()
+    };
     let (mut fit, fitter_report) = match &cfg.start_model {
         None => AdditiveFitter::new(fitter_cfg)
             .fit(&band)
@@ -764,6 +803,11 @@ pub fn run(
         };
         riv.progress = ProgressSink::none();
         let mut tested: Vec<(Effect, String)> = Vec::new();
+        let mut fresh_delay_tested = false;
+        // the data's own delay (phase slope of the FRF), a start for the delay effect
+        let data_delay = frf_data::delay::estimate_delay(&band, &Default::default())
+            .ok()
+            .map(|d| d.tau_s);
         let mut current = fit.model.clone();
         let mut current_cost = model_cost(&current, &fd);
         let mut response = initial_response.clone();
@@ -779,6 +823,7 @@ pub fn run(
                 fs_hz,
                 cfg.alpha,
                 &tested,
+                data_delay,
             );
             if cands.is_empty() {
                 break;
@@ -796,6 +841,8 @@ pub fn run(
                 let acfg = AdaptConfig {
                     min_f: cfg.min_f,
                     alpha: cfg.alpha,
+                    // every added mode must still pass the local and F tests
+                    peak_over_local: 5.0,
                     ..Default::default()
                 };
                 n_tests += 1;
@@ -841,7 +888,68 @@ pub fn run(
                     }
                 }
             }
-            let joint_passed = trials.iter().any(|t| t.f > t.f_crit);
+            // A delay large enough to matter also misplaces the modes fitted without
+            // it; refitting from the start (CMIF, delay estimated from the data's
+            // phase slope and refined, mode adaptation) is tested beside the
+            // incremental refit.
+            if !current.factor.fit_delay
+                && !fresh_delay_tested
+                && cands.iter().any(|c| c.0 == Effect::Delay)
+            {
+                fresh_delay_tested = true;
+                n_tests += 1;
+                cfg.progress.step(
+                    "diagnose",
+                    n_tests,
+                    None,
+                    None,
+                    format!(
+                        "round {}: testing a delay with a refit from the start",
+                        n_accepted + 1
+                    ),
+                );
+                let fc = FitterConfig {
+                    delay: DelayChoice::Auto,
+                    ..fresh_cfg.clone()
+                };
+                if let Ok((f, rep)) = AdditiveFitter::new(fc).fit(&band) {
+                    let m = f.model;
+                    let c = model_cost(&m, &fd);
+                    if c < current_cost && m.factor.fit_delay {
+                        let added = m.n_params().saturating_sub(current.n_params()).max(1);
+                        let stats = ResidualStats::new(&m, &fd);
+                        let s2 = noise_scale(c, &fd, m.n_params());
+                        let f = f_statistic(current_cost - c, added, s2);
+                        let p_eff = stats.effective_params(added, fd.m());
+                        let f_crit = (chi2_upper(p_eff, cfg.alpha) / p_eff).max(cfg.min_f);
+                        let evidence = format!(
+                            "the residual's phase slope; refitted from the start with the delay estimated from the data ({:.2} us) and refined to {:.2} us, {} modes",
+                            rep.delay_estimate.as_ref().map_or(f64::NAN, |d| d.tau_s * 1e6),
+                            m.factor.delay_s * 1e6,
+                            m.modes().len()
+                        );
+                        trials.push(Trial {
+                            effect: Effect::Delay,
+                            evidence,
+                            params: serde_json::json!({
+                                "seconds": m.factor.delay_s - current.factor.delay_s,
+                                "total_delay_s": m.factor.delay_s,
+                                "refit": "from the start"
+                            }),
+                            uncertainty: None,
+                            model: m,
+                            cost: c,
+                            f,
+                            f_crit,
+                            added,
+                            joint_modes: Vec::new(),
+                        });
+                    }
+                }
+            }
+            let joint_passed = trials
+                .iter()
+                .any(|t| t.f > t.f_crit && t.effect == Effect::MissedMode);
             let cands: Vec<Candidate> = cands
                 .into_iter()
                 .filter(|c| !(joint_passed && c.0 == Effect::MissedMode))
@@ -858,6 +966,11 @@ pub fn run(
                         .and_then(|v| v[0].as_u64())
                         .map(|i| format!("{}", i - 1))
                         .unwrap_or_default(),
+                    Effect::Delay => params
+                        .get("start")
+                        .and_then(|v| v.as_str())
+                        .unwrap_or_default()
+                        .to_string(),
                     _ => String::new(),
                 };
                 tested.push((effect, key));

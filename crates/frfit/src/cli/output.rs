@@ -83,6 +83,14 @@ pub fn print_fit(out: &PipelineOutput) {
         out.fit.iterations,
         out.fit.convergence.describe()
     );
+    if !out.fit.convergence.is_converged() {
+        eprintln!(
+            "warning: the fit did NOT converge ({}). The model is written, but check it; to try: \
+             `--method sk` (more robust far from the optimum), fewer modes (`--modes N`), a \
+             narrower band (`--band LO:HI`), or `--weighting magnitude`",
+            out.fit.convergence.describe()
+        );
+    }
     println!("     f [Hz]      zeta");
     for m in &s.final_model.modes {
         println!("  {:>10.4}  {:>8.5}", m.f_hz, m.zeta);
