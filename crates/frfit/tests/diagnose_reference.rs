@@ -147,3 +147,132 @@ fn crosstalk_feedthrough_is_found() {
     assert!(out.summary.final_model.feedthrough);
     assert_at_noise_level(&out);
 }
+
+/// `wafer_nominal.csv` with one actuator column or one sensor row passed through a
+/// first-order lag (variance scaled alike), keeping the file's declarations: an
+/// undeclared effect of the catalogue that the reference files do not hold.
+fn with_lag(
+    data: &frf_data::Frf,
+    column: Option<usize>,
+    row: Option<usize>,
+    fc_hz: f64,
+) -> frf_data::Frf {
+    let (ny, nu) = (data.ny(), data.nu());
+    let m = ny * nu;
+    let f = data.freq_hz_slice().to_vec();
+    let mut vals = data.values().to_vec();
+    let mut var = data.variances().map(|v| v.to_vec());
+    for (k, fk) in f.iter().enumerate() {
+        let lag = frf_data::C64::new(1.0, fk / fc_hz).inv();
+        for e in 0..m {
+            let (i, j) = (e % ny, e / ny);
+            if Some(j) == column || Some(i) == row {
+                vals[k * m + e] *= lag;
+                if let Some(v) = var.as_mut() {
+                    v[k * m + e] *= lag.norm_sqr();
+                }
+            }
+        }
+    }
+    let mut out = frf_data::Frf::new(f, ny, nu, vals, var).unwrap();
+    out.units = data.units.clone();
+    out.metadata = data.metadata.clone();
+    out.comments = data.comments.clone();
+    out
+}
+
+fn diagnose_frf(data: &frf_data::Frf, name: &str, cfg: PipelineConfig) -> PipelineOutput {
+    let out = run(data, name, &cfg, "diagnose").unwrap();
+    let s = &out.summary;
+    for st in s.steps.iter().filter(|s| s.accepted) {
+        println!(
+            "{name}: {} {} median {:.3e} -> {:.3e}",
+            st.effect, st.params, st.before.median_rel, st.after.median_rel
+        );
+    }
+    println!("{name}: verdict {}, final {:?}", s.verdict, s.final_errors);
+    out
+}
+
+#[test]
+fn actuator_and_sensor_lags_are_found() {
+    let test = "actuator_and_sensor_lags_are_found";
+    let Some(path) = require(test, "wafer_nominal.csv") else {
+        return;
+    };
+    let data = read_frf_csv(&path).unwrap();
+    let cfg = || PipelineConfig {
+        band_hz: Some((20.0, 2000.0)),
+        diagnose: true,
+        ..Default::default()
+    };
+    for (name, column, row, fc, effect, key) in [
+        (
+            "input lag",
+            Some(4),
+            None,
+            600.0,
+            "input_dynamics",
+            "inputs",
+        ),
+        (
+            "output lag",
+            None,
+            Some(1),
+            900.0,
+            "output_dynamics",
+            "outputs",
+        ),
+    ] {
+        let out = diagnose_frf(&with_lag(&data, column, row, fc), name, cfg());
+        let steps = accepted(&out, effect);
+        assert_eq!(steps.len(), 1, "{name}: one {effect} step");
+        let which = steps[0].params[key][0].as_u64().unwrap() as usize;
+        assert_eq!(
+            Some(which - 1),
+            column.or(row),
+            "{name}: the lagged channel"
+        );
+        let pole = steps[0].params["poles"][0]["f_hz"].as_f64().unwrap();
+        assert!(
+            (pole / fc - 1.0).abs() < 0.02,
+            "{name}: lag at {pole:.1} Hz, made at {fc}"
+        );
+        assert_eq!(out.summary.verdict, "noise_limited", "{name}");
+        assert_at_noise_level(&out);
+        assert_eq!(out.summary.final_model.modes.len(), 17, "{name}");
+    }
+}
+
+#[test]
+fn undeclared_delay_and_hold_are_found() {
+    let test = "undeclared_delay_and_hold_are_found";
+    let Some(path) = require(test, "wafer_nominal.csv") else {
+        return;
+    };
+    let mut data = read_frf_csv(&path).unwrap();
+    // the file no longer says how it was sampled; the user gives the sample rate only
+    data.comments.retain(|c| !c.contains("sampling"));
+    data.metadata.clear();
+    let cfg = PipelineConfig {
+        band_hz: Some((20.0, 2000.0)),
+        diagnose: true,
+        fs_hz: Some(10_000.0),
+        ..Default::default()
+    };
+    let out = diagnose_frf(&data, "undeclared", cfg);
+    assert!(out
+        .summary
+        .initial
+        .declared
+        .iter()
+        .all(|d| !d.contains("delay")));
+    let delay = accepted(&out, "delay");
+    assert_eq!(delay.len(), 1);
+    let total = delay[0].params["total_delay_s"].as_f64().unwrap();
+    assert!((total - 150e-6).abs() < 5e-6, "delay {:.2} us", total * 1e6);
+    assert_eq!(accepted(&out, "hold").len(), 1, "the hold is found");
+    assert_eq!(out.summary.final_model.hold, "zoh:10000");
+    assert_eq!(out.summary.verdict, "noise_limited");
+    assert_at_noise_level(&out);
+}
