@@ -639,6 +639,27 @@ fn fitted_params(
     }
 }
 
+/// The F test of a refit `model` that adds `added` real parameters and lowers the
+/// weighted cost from `before` to `after`: the cost explained per added parameter over
+/// the noise scale of the larger model, and its critical value at `cfg.alpha` with the
+/// effective number of parameters (correlated residuals), floored at `cfg.min_f`.
+/// Returns the residual statistics of `model` as well (the local tests use them).
+fn f_test(
+    model: &AdditiveModel,
+    fd: &FitData,
+    before: f64,
+    after: f64,
+    added: usize,
+    cfg: &PipelineConfig,
+) -> (ResidualStats, f64, f64) {
+    let stats = ResidualStats::new(model, fd);
+    let s2 = noise_scale(after, fd, model.n_params());
+    let f = f_statistic(before - after, added, s2);
+    let p_eff = stats.effective_params(added, fd.m());
+    let f_crit = (chi2_upper(p_eff, cfg.alpha) / p_eff).max(cfg.min_f);
+    (stats, f, f_crit)
+}
+
 /// Refits a candidate: numerators (eq. 24), then Algorithm 1 to a coarse tolerance.
 fn refit(
     model: AdditiveModel,
@@ -860,11 +881,7 @@ pub fn run(
                     let joint = new_modes(&current, &m);
                     let added = m.n_params().saturating_sub(current.n_params());
                     if !joint.is_empty() && added > 0 && c < current_cost {
-                        let stats = ResidualStats::new(&m, &fd);
-                        let s2 = noise_scale(c, &fd, m.n_params());
-                        let f = f_statistic(current_cost - c, added, s2);
-                        let p_eff = stats.effective_params(added, fd.m());
-                        let f_crit = (chi2_upper(p_eff, cfg.alpha) / p_eff).max(cfg.min_f);
+                        let (_, f, f_crit) = f_test(&m, &fd, current_cost, c, added, cfg);
                         let list: Vec<String> =
                             joint.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
                         let evidence = format!(
@@ -917,11 +934,7 @@ pub fn run(
                     let c = model_cost(&m, &fd);
                     if c < current_cost && m.factor.fit_delay {
                         let added = m.n_params().saturating_sub(current.n_params()).max(1);
-                        let stats = ResidualStats::new(&m, &fd);
-                        let s2 = noise_scale(c, &fd, m.n_params());
-                        let f = f_statistic(current_cost - c, added, s2);
-                        let p_eff = stats.effective_params(added, fd.m());
-                        let f_crit = (chi2_upper(p_eff, cfg.alpha) / p_eff).max(cfg.min_f);
+                        let (_, f, f_crit) = f_test(&m, &fd, current_cost, c, added, cfg);
                         let evidence = format!(
                             "the residual's phase slope; refitted from the start with the delay estimated from the data ({:.2} us) and refined to {:.2} us, {} modes",
                             rep.delay_estimate.as_ref().map_or(f64::NAN, |d| d.tau_s * 1e6),
@@ -986,11 +999,7 @@ pub fn run(
                 let Ok((m, c)) = refit(aug, &fd, &riv) else {
                     continue;
                 };
-                let stats = ResidualStats::new(&m, &fd);
-                let s2 = noise_scale(c, &fd, m.n_params());
-                let mut f = f_statistic(current_cost - c, added, s2);
-                let p_eff = stats.effective_params(added, fd.m());
-                let f_crit = (chi2_upper(p_eff, cfg.alpha) / p_eff).max(cfg.min_f);
+                let (stats, mut f, f_crit) = f_test(&m, &fd, current_cost, c, added, cfg);
                 let mut evidence = evidence;
                 if let Some(fp) = peak {
                     // a missed mode must also remove most of the residual around its peak

@@ -2,75 +2,11 @@
 //! binary, on a simulated 2 x 3 plant the test writes (no shared files needed), and the
 //! errors a user sees.
 
-use faer::Mat;
 use frf_data::io::read_frf_csv;
 use frf_data::{Frf, FrfDataset};
-use realize::{ModalModel, PolePair};
-use std::f64::consts::TAU;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frfit"))
-        .args(args)
-        .output()
-        .expect("the frfit binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn temp_dir(test: &str) -> PathBuf {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
-    let d = std::env::temp_dir().join(format!(
-        "frfit-cli-fit-{test}-{}-{nanos}",
-        std::process::id()
-    ));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-/// A 2 x 3 plant (free body + modes at 35, 80 and 150 Hz), 5..200 Hz in 0.25 Hz lines,
-/// optionally delayed, with a variance of (1e-3 |G|)^2 attached.
-fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
-    let (ny, nu) = (2, 3);
-    let mut m = ModalModel::new(ny, nu);
-    m.rigid = vec![
-        Mat::zeros(ny, nu),
-        Mat::from_fn(ny, nu, |i, j| 0.5 + 0.1 * (i + 2 * j) as f64),
-    ];
-    let shapes = [
-        ([1.0, 0.4], [1.0, -0.5, 0.3]),
-        ([0.3, -1.0], [0.2, 1.0, 0.8]),
-        ([1.0, 1.0], [-0.7, 0.4, 1.0]),
-    ];
-    for (f, (c, b)) in [35.0, 80.0, 150.0].iter().zip(shapes) {
-        let num = Mat::from_fn(ny, nu, |i, j| c[i] * b[j] * (TAU * f).powi(2) * 2.0);
-        m.pairs.push(PolePair::from_second_order(*f, 0.01, &num));
-    }
-    let f: Vec<f64> = (0..781).map(|k| 5.0 + 0.25 * k as f64).collect();
-    let w: Vec<f64> = f.iter().map(|x| TAU * x).collect();
-    let g = m.freq_response(&w).unwrap();
-    let frf = Frf::from_grid(f, g).unwrap();
-    let frf = Frf::from_fn(frf.freq_hz_slice().to_vec(), ny, nu, |k, i, j| {
-        frf.value(k, i, j) * frf_data::C64::from_polar(1.0, -w[k] * delay_s)
-    })
-    .unwrap();
-    let var: Vec<f64> = frf
-        .values()
-        .iter()
-        .map(|z| (1e-3 * z.norm()).powi(2))
-        .collect();
-    let mut frf = frf.with_variance(Some(var)).unwrap();
-    frf.units = Some("m/N".into());
-    let path = dir.join("plant.csv");
-    frf_data::io::write_frf_csv(&path, &frf, &["simulated 2x3 plant".into()]).unwrap();
-    path
-}
+mod common;
+use common::*;
 
 /// Median relative difference of two FRFs on the same lines.
 fn median_rel(a: &Frf, b: &Frf) -> f64 {
@@ -249,6 +185,6 @@ fn user_errors_are_clear() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-fn e_contains_panic(o: &Output) -> bool {
+fn e_contains_panic(o: &std::process::Output) -> bool {
     stderr(o).contains("panicked")
 }

@@ -2,86 +2,16 @@
 //! test writes (a simulated 2 x 3 plant with three modes) and, when the shared reference
 //! data are there, on `wafer_nominal.csv`.
 
-use faer::Mat;
 use frf_data::shared_data::require;
 use frf_data::Frf;
-use realize::{ModalModel, PolePair};
-use std::f64::consts::TAU;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-const MODES_HZ: [f64; 3] = [35.0, 80.0, 150.0];
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_frfit"))
-}
-
-fn run(args: &[&str]) -> Output {
-    bin().args(args).output().expect("the frfit binary runs")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// A unique temporary directory for one test.
-fn temp_dir(test: &str) -> PathBuf {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
-    let d = std::env::temp_dir().join(format!("frfit-cli-{test}-{}-{nanos}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-/// Writes a 2 x 3 plant (rigid body + modes at 35, 80, 150 Hz), 5..200 Hz in 0.25 Hz
-/// lines, with a small variance, to `dir/plant.csv`.
-fn write_plant(dir: &Path) -> PathBuf {
-    let (ny, nu) = (2, 3);
-    let mut m = ModalModel::new(ny, nu);
-    m.rigid = vec![
-        Mat::zeros(ny, nu),
-        Mat::from_fn(ny, nu, |i, j| 0.5 + 0.1 * (i + 2 * j) as f64),
-    ];
-    let shapes = [
-        ([1.0, 0.4], [1.0, -0.5, 0.3]),
-        ([0.3, -1.0], [0.2, 1.0, 0.8]),
-        ([1.0, 1.0], [-0.7, 0.4, 1.0]),
-    ];
-    for (f, (c, b)) in MODES_HZ.iter().zip(shapes) {
-        let num = Mat::from_fn(ny, nu, |i, j| c[i] * b[j] * (TAU * f).powi(2) * 2.0);
-        m.pairs.push(PolePair::from_second_order(*f, 0.01, &num));
-    }
-    let f: Vec<f64> = (0..781).map(|k| 5.0 + 0.25 * k as f64).collect();
-    let w: Vec<f64> = f.iter().map(|x| TAU * x).collect();
-    let g = m.freq_response(&w).unwrap();
-    let frf = Frf::from_grid(f, g).unwrap();
-    let var: Vec<f64> = frf
-        .values()
-        .iter()
-        .map(|z| (1e-3 * z.norm()).powi(2))
-        .collect();
-    let mut frf = frf.with_variance(Some(var)).unwrap();
-    frf.units = Some("m/N".into());
-    let path = dir.join("plant.csv");
-    frf_data::io::write_frf_csv(
-        &path,
-        &frf,
-        &["simulated 2x3 plant for the CLI tests".into()],
-    )
-    .unwrap();
-    path
-}
+mod common;
+use common::*;
 
 #[test]
 fn info_summarises_the_file() {
     let dir = temp_dir("info");
-    let csv = write_plant(&dir);
+    let csv = write_plant(&dir, 0.0);
     let o = run(&["info", csv.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = stdout(&o);
@@ -136,7 +66,7 @@ fn peaks_of(json: &serde_json::Value) -> Vec<f64> {
 #[test]
 fn cmif_json_finds_the_modes() {
     let dir = temp_dir("cmif-json");
-    let csv = write_plant(&dir);
+    let csv = write_plant(&dir, 0.0);
     let o = run(&["cmif", csv.to_str().unwrap(), "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
@@ -176,7 +106,7 @@ fn cmif_json_finds_the_modes() {
 #[test]
 fn cmif_table_and_svg() {
     let dir = temp_dir("cmif-svg");
-    let csv = write_plant(&dir);
+    let csv = write_plant(&dir, 0.0);
     let svg = dir.join("cmif.svg");
     let o = run(&[
         "cmif",
@@ -206,7 +136,7 @@ fn cmif_table_and_svg() {
 #[test]
 fn errors_are_clear() {
     let dir = temp_dir("errors");
-    let csv = write_plant(&dir);
+    let csv = write_plant(&dir, 0.0);
     // Missing file: the path is named.
     let missing = dir.join("does-not-exist.csv");
     for cmd in ["info", "cmif"] {
