@@ -151,9 +151,66 @@ impl AdditiveFitter {
     }
 
     /// Runs the method on `data` (already restricted to the band to fit).
+    ///
+    /// With [`DelayChoice::Auto`], when the refinement moves the delay by more than 5 %
+    /// (and 2 us) from the estimate it started from, the choices made at the start
+    /// (rigid body, numerators) were made with a wrong delay: the fit is run again from
+    /// the start with the refined delay, and the better of the two is kept.
     pub fn fit<D: FrfDataset + ?Sized + Sync>(
         &self,
         data: &D,
+    ) -> Result<(Fit<AdditiveModel>, FitterReport), RivError> {
+        let (fit, report) = self.fit_from(data, None)?;
+        let start = report
+            .delay_estimate
+            .as_ref()
+            .map(|d| d.tau_s - self.hold_share());
+        let (Some(start), DelayChoice::Auto) = (start, self.config.delay) else {
+            return Ok((fit, report));
+        };
+        let refined = fit.model.factor.delay_s;
+        if (refined - start).abs() <= (0.05 * start.abs()).max(2e-6) {
+            return Ok((fit, report));
+        }
+        let (mut second, second_report) = self.fit_from(data, Some(refined))?;
+        let (c1, c2) = (
+            fit.final_cost().unwrap_or(f64::INFINITY),
+            second.final_cost().unwrap_or(f64::INFINITY),
+        );
+        if c2 < c1 {
+            second.messages.push(format!(
+                "the delay moved from {:.2} us (estimate) to {:.2} us in the refinement: fitted again from the start with it (cost {c1:.4e} -> {c2:.4e})",
+                start * 1e6,
+                refined * 1e6
+            ));
+            let mut second_report = second_report;
+            second_report.delay_estimate = report.delay_estimate;
+            Ok((second, second_report))
+        } else {
+            let mut fit = fit;
+            fit.messages.push(format!(
+                "the delay moved from {:.2} us (estimate) to {:.2} us in the refinement; a fit from the start with it was not better (cost {c2:.4e} against {c1:.4e})",
+                start * 1e6,
+                refined * 1e6
+            ));
+            Ok((fit, report))
+        }
+    }
+
+    /// The part of the delay the exact hold models itself (half a sample).
+    fn hold_share(&self) -> f64 {
+        match self.config.hold {
+            Hold::Zoh { fs_hz } => 0.5 / fs_hz,
+            _ => 0.0,
+        }
+    }
+
+    /// [`fit`](Self::fit) in one pass; `delay_start` replaces the delay estimate of
+    /// [`DelayChoice::Auto`] (the delay is still refined).
+    fn fit_from<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        delay_start: Option<f64>,
     ) -> Result<(Fit<AdditiveModel>, FitterReport), RivError> {
         let cfg = &self.config;
         let t0 = Instant::now();
@@ -182,6 +239,7 @@ impl AdditiveFitter {
         let (delay_s, fit_delay) = match cfg.delay {
             DelayChoice::None => (0.0, false),
             DelayChoice::Fixed { seconds } => (seconds, false),
+            DelayChoice::Auto if delay_start.is_some() => (delay_start.unwrap_or(0.0), true),
             DelayChoice::Auto => {
                 let t = Instant::now();
                 let est = estimate_delay(data, &cfg.delay_config)?;
