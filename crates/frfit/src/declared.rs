@@ -17,6 +17,9 @@ pub struct Declared {
     /// a comment that names a "hold" and says it is present ("present: True",
     /// "hold present") and not absent ("False", "no hold").
     pub zoh: bool,
+    /// Realizations the variance was estimated from ("10 periods x 10 realizations", or
+    /// metadata `realizations`): it sets the degrees of freedom of the variance.
+    pub realizations: Option<usize>,
     /// Where each value came from (for reports).
     pub sources: Vec<String>,
 }
@@ -124,8 +127,37 @@ pub fn declared(frf: &Frf) -> Declared {
             _ => {}
         }
     }
+    if let Some(r) = frf
+        .metadata
+        .iter()
+        .find(|(k, _)| k.eq_ignore_ascii_case("realizations"))
+        .and_then(|(_, v)| v.trim().parse::<usize>().ok())
+    {
+        d.realizations = Some(r);
+        d.sources
+            .push(format!("{r} realizations from metadata `realizations`"));
+    }
     for c in &frf.comments {
         let lower = c.to_ascii_lowercase();
+        if d.realizations.is_none() {
+            // "<n> realizations": the number right before the word
+            let words: Vec<&str> = lower
+                .split(|ch: char| ch.is_whitespace() || ch == ',' || ch == ';')
+                .filter(|w| !w.is_empty())
+                .collect();
+            if let Some(i) = words.iter().position(|w| w.starts_with("realization")) {
+                if let Some(r) = i
+                    .checked_sub(1)
+                    .and_then(|j| words[j].parse::<usize>().ok())
+                {
+                    d.realizations = Some(r);
+                    d.sources.push(format!(
+                        "{r} realizations from the comment \"{}\"",
+                        c.trim()
+                    ));
+                }
+            }
+        }
         if lower.contains("hold") && !d.zoh {
             let absent = lower.contains("false")
                 || lower.contains("no hold")

@@ -802,12 +802,18 @@ pub fn run(
     let initial_errors = error_stats(&band, &initial_response, &noise);
     let mut steps: Vec<StepSummary> = Vec::new();
     let mut step_responses = Vec::new();
+    // a variance estimated from R realizations has 2 (R - 1) real degrees of freedom
+    let variance_dof = match (band.has_variance(), decl.realizations) {
+        (true, Some(r)) if r >= 3 => Some(2.0 * (r as f64 - 1.0)),
+        _ => None,
+    };
     let rcfg = |model: &AdditiveModel| ResidualConfig {
         sample_rate_hz: if model.domain() == additive_riv::Domain::Continuous {
             fs_hz
         } else {
             None
         },
+        variance_dof,
         ..Default::default()
     };
     let mut analysis = analyze_residual(&band, &initial_response, &noise, &rcfg(&fit.model))

@@ -71,7 +71,8 @@ use crate::signatures::{
 };
 use crate::stats::ScaledChi2;
 use crate::stats::{
-    chi2_isf, chi2_median, chi2_sf, mad, median, normal_sf, quantiles_mut, running_median_bounded,
+    chi2_isf, chi2_median, chi2_sf, f_isf, mad, median, normal_sf, quantiles_mut,
+    running_median_bounded,
 };
 use crate::ValidationError;
 use frf_data::cmif::PeakConfig;
@@ -96,6 +97,15 @@ pub struct ResidualConfig {
     /// that the calibration accepts as noise; a median line above it is a broadband
     /// misfit. Default 1.5.
     pub max_noise_scale: f64,
+    /// Real degrees of freedom of the variance estimate per entry, `2 (R - 1)` for a
+    /// mean over `R` realizations (`None`: treat the variance as known, the default).
+    /// With few realizations `|E|^2 / var` is F- rather than chi-square-distributed, with
+    /// a much heavier tail: the threshold of the localized test then comes from
+    /// `F(nu, variance_dof)`, scaled to the calibrated median, and the largest noise
+    /// scale accepted ([`max_noise_scale`](Self::max_noise_scale)) grows by the mean of
+    /// `F(., variance_dof)`, `d2 / (d2 - 2)`, so that the spread of an estimated variance
+    /// is not called an effect.
+    pub variance_dof: Option<f64>,
     /// Smallest `kappa` the calibration uses: a residual far below the stated noise
     /// (a noise-free simulation, an overestimated variance) is calibrated at this
     /// fraction of it, so that its rounding-level structure is not called significant.
@@ -151,6 +161,7 @@ impl Default for ResidualConfig {
             min_excess: 0.05,
             max_noise_scale: 1.5,
             min_noise_scale: 0.25,
+            variance_dof: None,
             local_half_window: 25,
             local_rel: 0.1,
             peak_over_local: 4.0,
@@ -172,6 +183,15 @@ impl ResidualConfig {
         }
         if !(self.min_excess >= 0.0 && self.min_excess.is_finite()) {
             return bad("min_excess", self.min_excess, "must be finite and >= 0");
+        }
+        if let Some(d) = self.variance_dof {
+            if !(d > 2.0 && d.is_finite()) {
+                return bad(
+                    "variance_dof",
+                    d,
+                    "must be finite and > 2 (at least 3 realizations)",
+                );
+            }
         }
         if !(self.min_noise_scale > 0.0 && self.min_noise_scale <= 1.0) {
             return bad("min_noise_scale", self.min_noise_scale, "must be in (0, 1]");
@@ -779,9 +799,12 @@ fn calibrate(
         0.5
     };
     let kappa = c0 * nu / m as f64;
-    let capped = kappa > cfg.max_noise_scale;
+    // an estimated variance inflates the mean noise energy by d2 / (d2 - 2) (the mean
+    // of F(., d2)): the cap follows
+    let max_scale = cfg.max_noise_scale * cfg.variance_dof.map_or(1.0, |d| d / (d - 2.0));
+    let capped = kappa > max_scale;
     let c = if capped {
-        cfg.max_noise_scale * m as f64 / nu
+        max_scale * m as f64 / nu
     } else if kappa < cfg.min_noise_scale {
         cfg.min_noise_scale * m as f64 / nu
     } else {
@@ -807,7 +830,11 @@ fn calibrate(
         p_value < cfg.alpha && level_p_value < cfg.alpha && level_ratio > 1.0 + cfg.min_excess;
     // 4. Localized test on the three-line median.
     let p3 = (cfg.alpha / (3.0 * n as f64)).sqrt();
-    let thr = c * chi2_isf(p3, nu);
+    let thr = match cfg.variance_dof {
+        None => c * chi2_isf(p3, nu),
+        // the same median, the tail of F(nu, d2)
+        Some(d2) => c * chi2_median(nu) * f_isf(p3, nu, d2) / f_isf(0.5, nu, d2),
+    };
     let mut localized = vec![false; n];
     for k in 0..n {
         let a = k.saturating_sub(1);
