@@ -639,6 +639,16 @@ fn fitted_params(
     }
 }
 
+/// Submodels and dynamics factors of `model` with a pole in the closed right half-plane.
+fn unstable_parts(model: &AdditiveModel) -> usize {
+    model.unstable_submodels().len()
+        + model
+            .dynamics
+            .iter()
+            .filter(|d| d.poles().iter().any(|p| p.re >= 0.0))
+            .count()
+}
+
 /// The F test of a refit `model` that adds `added` real parameters and lowers the
 /// weighted cost from `before` to `after`: the cost explained per added parameter over
 /// the noise scale of the larger model, and its critical value at `cfg.alpha` with the
@@ -669,6 +679,16 @@ fn refit(
     let mut m = model;
     fit_numerators(&mut m, fd).map_err(err("refit"))?;
     let f = iterate(m, fd, riv).map_err(err("refit"))?;
+    // a refit whose iterations failed (singular, no descent) before any step was taken
+    // did not fit the effect: its model is the start, not an estimate
+    if let (frf_data::Convergence::Failed { reason }, true) =
+        (&f.convergence, f.cost_history.len() <= 1)
+    {
+        return Err(FrfitError::Fit {
+            what: "refit".into(),
+            why: reason.clone(),
+        });
+    }
     let c = model_cost(&f.model, fd);
     Ok((f.model, c))
 }
@@ -1048,7 +1068,7 @@ pub fn run(
                     // an effect that leaves a pole in the right half-plane is not a fix
                     tr.f > tr.f_crit
                         && tr.cost < current_cost
-                        && tr.model.unstable_submodels().len() <= current.unstable_submodels().len()
+                        && unstable_parts(&tr.model) <= unstable_parts(&current)
                 })
                 .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
                 .map(|(i, _)| i);
@@ -1139,8 +1159,22 @@ pub fn run(
             weighting: cfg.weighting.clone(),
             ..Default::default()
         };
-        let last = iterate(current, &fd, &full).map_err(err("final refinement"))?;
+        let unstable_before = unstable_parts(&current);
+        let mut last = iterate(current.clone(), &fd, &full).map_err(err("final refinement"))?;
         let mut msgs = std::mem::take(&mut fit.messages);
+        if unstable_parts(&last.model) > unstable_before {
+            msgs.push(
+                "the final refinement moved a pole into the right half-plane; the model of the last accepted step is kept".into(),
+            );
+            let keep = Fit::from_model(current, last.estimator.clone());
+            last = Fit {
+                cost_history: vec![model_cost(&keep.model, &fd) / (2.0 * fd.n as f64)],
+                convergence: frf_data::Convergence::Failed {
+                    reason: "the final refinement left the stable region; stopped at the last accepted step".into(),
+                },
+                ..keep
+            };
+        }
         // the loop never ends worse than it started
         let initial_cost = model_cost(&initial_model, &fd);
         if model_cost(&last.model, &fd) > initial_cost {
