@@ -21,6 +21,27 @@ fn median_rel(a: &Frf, b: &Frf) -> f64 {
     v[v.len() / 2]
 }
 
+/// Runs `frfit eval MODEL --at CSV` into `dir/pred.csv` and returns the median relative
+/// difference of the prediction from the data.
+fn eval_error(model: &std::path::Path, csv: &std::path::Path, dir: &std::path::Path) -> f64 {
+    let pred = dir.join("pred.csv");
+    let o = run(&[
+        "eval",
+        model.to_str().unwrap(),
+        "--at",
+        csv.to_str().unwrap(),
+        "--out",
+        pred.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    median_rel(&read_frf_csv(&pred).unwrap(), &read_frf_csv(csv).unwrap())
+}
+
+/// A JSON file the binary wrote.
+fn read_json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
 #[test]
 fn fit_then_eval_reproduces_the_data() {
     let dir = temp_dir("fit-eval");
@@ -36,8 +57,7 @@ fn fit_then_eval_reproduces_the_data() {
         "--quiet",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let json: serde_json::Value = read_json(&model);
     let modes: Vec<f64> = json["modes"]
         .as_array()
         .unwrap()
@@ -48,17 +68,7 @@ fn fit_then_eval_reproduces_the_data() {
     for (f, t) in modes.iter().zip([35.0, 80.0, 150.0]) {
         assert!((f / t - 1.0).abs() < 1e-6, "{f} vs {t}");
     }
-    let pred = dir.join("pred.csv");
-    let o = run(&[
-        "eval",
-        model.to_str().unwrap(),
-        "--at",
-        csv.to_str().unwrap(),
-        "--out",
-        pred.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let e = median_rel(&read_frf_csv(&pred).unwrap(), &read_frf_csv(&csv).unwrap());
+    let e = eval_error(&model, &csv, &dir);
     assert!(e < 1e-8, "median relative error {e:e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -85,22 +95,11 @@ fn a_poor_delay_estimate_is_recovered_by_a_second_pass() {
         "{}",
         stdout(&o)
     );
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let json: serde_json::Value = read_json(&model);
     let delay = json["delay_s"].as_f64().unwrap();
     assert!((delay - 80e-6).abs() < 1e-12, "delay {delay:e}");
     assert_eq!(json["rigid_body"]["integrators"], 2);
-    let pred = dir.join("pred.csv");
-    let o = run(&[
-        "eval",
-        model.to_str().unwrap(),
-        "--at",
-        csv.to_str().unwrap(),
-        "--out",
-        pred.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let e = median_rel(&read_frf_csv(&pred).unwrap(), &read_frf_csv(&csv).unwrap());
+    let e = eval_error(&model, &csv, &dir);
     assert!(e < 1e-10, "median relative error {e:e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -127,8 +126,7 @@ fn fit_accepts_a_hold_and_a_delay_and_writes_a_report() {
         "--quiet",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let json: serde_json::Value = read_json(&model);
     assert!(
         json["hold"].to_string().contains("4000"),
         "{}",
@@ -171,17 +169,7 @@ fn diagnose_finds_an_undeclared_delay_and_eval_includes_it() {
     assert!(s["final"]["residual_to_noise"].as_f64().unwrap() < 1e-3);
     assert_eq!(s["verdict"], "noise_limited");
     // the final model's response includes the delay the loop added
-    let pred = dir.join("pred.csv");
-    let o = run(&[
-        "eval",
-        report.join("model.json").to_str().unwrap(),
-        "--at",
-        csv.to_str().unwrap(),
-        "--out",
-        pred.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let e = median_rel(&read_frf_csv(&pred).unwrap(), &read_frf_csv(&csv).unwrap());
+    let e = eval_error(&report.join("model.json"), &csv, &dir);
     assert!(e < 1e-8, "median relative error {e:e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
