@@ -350,9 +350,15 @@ impl Basis {
             })
             .collect();
         for (k, &w) in omega.iter().enumerate() {
-            let f0_inv = model.factor.at(w).inv();
+            let f0 = model.factor.at(w);
+            let f0_inv = f0.inv();
+            // the discrete variable is the same for every submodel: one sincos per line
+            let z = match model.domain() {
+                crate::Domain::ZohDiscrete { ts } => Some(C64::from_polar(1.0, -w * ts)),
+                crate::Domain::Continuous => None,
+            };
             for (i, s) in model.submodels.iter().enumerate() {
-                let x = model.variable(s, w);
+                let x = z.unwrap_or_else(|| model.variable(s, w));
                 let a = s.den_at(x);
                 let mut pa = s.num_poly_at(x) / (model.integrator_factor(s.integrators, x) * a);
                 if s.bypass_factor {
@@ -389,7 +395,6 @@ impl Basis {
                     xr *= x;
                 }
             }
-            let f0 = model.factor.at(w);
             for e in 0..m {
                 f[e * n + k] = f0;
             }
@@ -434,7 +439,12 @@ impl Basis {
                 q += 1;
             }
         }
-        let f_abs = f.iter().map(|z| z.norm()).collect();
+        // |F| without hypot's overflow guard: F is a delay, a hold, (j w)^k and
+        // first/second-order factors, far from the range where squares overflow
+        let f_abs = f
+            .iter()
+            .map(|z| (z.re * z.re + z.im * z.im).sqrt())
+            .collect();
         let f_inv = f.iter().map(|z| z.inv()).collect();
         Self {
             n,
