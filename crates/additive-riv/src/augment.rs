@@ -49,7 +49,8 @@ pub fn with_crosstalk(model: &AdditiveModel) -> Result<AdditiveModel, RivError> 
     Ok(m)
 }
 
-/// Replaces the free rigid body `B / s^2` by a suspended one
+/// Replaces the free rigid body `B / s^l` (`l` = 2, or 1 when the first fit took the
+/// suspension's damped roll-off for one integrator) by a suspended one
 /// `B / (s^2 + 2 zeta w_s s + w_s^2)` (a stiffness), kind [`SubmodelKind::Suspension`].
 pub fn with_stiffness(
     model: &AdditiveModel,
@@ -59,8 +60,8 @@ pub fn with_stiffness(
     let idx = model
         .submodels
         .iter()
-        .position(|s| s.kind == SubmodelKind::RigidBody && s.integrators == 2)
-        .ok_or_else(|| RivError::Structure("no free rigid body (1/s^2) to suspend".into()))?;
+        .position(|s| s.kind == SubmodelKind::RigidBody && s.integrators >= 1)
+        .ok_or_else(|| RivError::Structure("no rigid body (1/s^l) to suspend".into()))?;
     let mut m = model.clone();
     m.remove_submodel(idx);
     let i = m.push_mode(f_hz, zeta, false)?;

@@ -496,10 +496,12 @@ fn candidates(
             ));
         }
     }
+    // a suspended body seen from above its suspension frequency looks like 1/s^2 or,
+    // with its damping, like 1/s to the first fit: either rigid body can be suspended
     let has_free_rb = model
         .submodels
         .iter()
-        .any(|s| s.kind == SubmodelKind::RigidBody && s.integrators == 2);
+        .any(|s| s.kind == SubmodelKind::RigidBody && s.integrators >= 1);
     if has_free_rb && plausible(&an.stiffness.fit, alpha) {
         let s = &an.stiffness;
         let f = if s.f_hz.is_finite() && s.f_hz > 0.0 {
