@@ -14,9 +14,9 @@ use clap::Args as ClapArgs;
 use frf_data::synth::{ControllerConfig, ExperimentConfig, WaferStageConfig, WaferStageExperiment};
 use frf_data::truth::Truth;
 use frf_data::{FrfDataset, ProgressSink};
-use frfit::additive_riv::{Hold, ModelFile, Provenance};
+use frfit::additive_riv::{Hold, ModelFile};
 use frfit::pipeline::{self, PipelineConfig, PipelineOutput};
-use frfit::report::{write_report, ReportInput};
+use frfit::report::write_report;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -130,40 +130,16 @@ fn write_model_and_report(
     data_path: &Path,
     seed: u64,
 ) -> Result<Vec<PathBuf>, Error> {
-    let provenance = Provenance {
-        estimator: out.fit.estimator.clone(),
-        data: Some(data_path.display().to_string()),
-        weighting: out.fitter_report.weighting.clone(),
-        iterations: out.fit.iterations,
-        convergence: out.fit.convergence.describe(),
-        cost: out.fit.final_cost(),
-        frfit_version: format!("{} (cargo xtask wafer-stage)", env!("CARGO_PKG_VERSION")),
-        notes: out.fit.messages.clone(),
-    };
-    let band = out.summary.data.band_hz;
-    let file = ModelFile::from_model(
-        &out.fit.model,
-        out.band.units.clone(),
-        Some((band[0], band[1])),
-        provenance,
-    )
-    .stage("model file")?;
+    let file = out
+        .model_file(data_path, "cargo xtask wafer-stage")
+        .stage("model file")?;
     let model_path = dir.join("model.json");
     file.write(&model_path).stage("model file")?;
     let title = format!(
         "Simulated wafer stage (seed {seed}): frfit diagnose of {}",
         data_path.display()
     );
-    let input = ReportInput {
-        data: &out.band,
-        noise_var: Some(&out.noise.variance),
-        cmif: &out.cmif,
-        peaks: &out.peaks,
-        initial: &out.initial_response,
-        final_model: &out.final_response,
-        steps: &out.step_responses,
-        title: &title,
-    };
+    let input = out.report_input(&title);
     let mut written = vec![model_path];
     written.extend(write_report(dir, &input, &out.summary).stage("report")?);
     Ok(written)

@@ -156,6 +156,49 @@ fn err<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> FrfitError + '_ {
     }
 }
 
+impl PipelineOutput {
+    /// The model file of the final fit (modal form, submodels and provenance), as
+    /// `frfit fit/diagnose` and `cargo xtask wafer-stage` write it; `producer` names
+    /// what ran (e.g. `frfit diagnose`).
+    pub fn model_file(
+        &self,
+        data_path: &std::path::Path,
+        producer: &str,
+    ) -> Result<additive_riv::ModelFile, additive_riv::RivError> {
+        let provenance = additive_riv::Provenance {
+            estimator: self.fit.estimator.clone(),
+            data: Some(data_path.display().to_string()),
+            weighting: self.fitter_report.weighting.clone(),
+            iterations: self.fit.iterations,
+            convergence: self.fit.convergence.describe(),
+            cost: self.fit.final_cost(),
+            frfit_version: format!("{} ({producer})", env!("CARGO_PKG_VERSION")),
+            notes: self.fit.messages.clone(),
+        };
+        let band = self.summary.data.band_hz;
+        additive_riv::ModelFile::from_model(
+            &self.fit.model,
+            self.band.units.clone(),
+            Some((band[0], band[1])),
+            provenance,
+        )
+    }
+
+    /// What [`crate::report::write_report`] needs from this run, under `title`.
+    pub fn report_input<'a>(&'a self, title: &'a str) -> crate::report::ReportInput<'a> {
+        crate::report::ReportInput {
+            data: &self.band,
+            noise_var: Some(&self.noise.variance),
+            cmif: &self.cmif,
+            peaks: &self.peaks,
+            initial: &self.initial_response,
+            final_model: &self.final_response,
+            steps: &self.step_responses,
+            title,
+        }
+    }
+}
+
 /// Error statistics of `model` against `data` with `noise`.
 fn error_stats(data: &Frf, response: &ResponseGrid, noise: &NoiseLevel) -> ErrorStats {
     let m = data.n_entries();
@@ -569,14 +612,11 @@ fn fitted_params(
         Effect::MissedMode => {
             // the mode of `m` that `before` does not have: the one nearest the start
             let f0 = start["f_hz"].as_f64().unwrap_or(0.0);
-            let old: Vec<f64> = before.modes().iter().map(|x| x.f_hz).collect();
-            let new = m
-                .modes()
+            let new = new_modes(before, m)
                 .into_iter()
-                .filter(|x| !old.iter().any(|o| (o - x.f_hz).abs() < 1e-9 * x.f_hz))
-                .min_by(|a, b| (a.f_hz - f0).abs().total_cmp(&(b.f_hz - f0).abs()));
+                .min_by(|a, b| (a.0 - f0).abs().total_cmp(&(b.0 - f0).abs()));
             match new {
-                Some(x) => serde_json::json!({"f_hz": x.f_hz, "zeta": x.zeta}),
+                Some((f_hz, zeta)) => serde_json::json!({"f_hz": f_hz, "zeta": zeta}),
                 None => start.clone(),
             }
         }

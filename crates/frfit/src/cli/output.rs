@@ -1,8 +1,7 @@
 //! Writing what a fit produced (model JSON, report) and printing its summary.
 
-use frfit::additive_riv::{ModelFile, Provenance};
 use frfit::pipeline::PipelineOutput;
-use frfit::report::{write_report, ReportInput};
+use frfit::report::write_report;
 use frfit::FrfitError;
 use std::path::Path;
 
@@ -14,26 +13,12 @@ pub fn write_outputs(
     data_path: &Path,
     command: &str,
 ) -> Result<(), FrfitError> {
-    let prov = Provenance {
-        estimator: out.fit.estimator.clone(),
-        data: Some(data_path.display().to_string()),
-        weighting: out.fitter_report.weighting.clone(),
-        iterations: out.fit.iterations,
-        convergence: out.fit.convergence.describe(),
-        cost: out.fit.final_cost(),
-        frfit_version: format!("{} ({command})", env!("CARGO_PKG_VERSION")),
-        notes: out.fit.messages.clone(),
-    };
-    let file = ModelFile::from_model(
-        &out.fit.model,
-        out.band.units.clone(),
-        Some((out.summary.data.band_hz[0], out.summary.data.band_hz[1])),
-        prov,
-    )
-    .map_err(|e| FrfitError::Fit {
-        what: "model file".into(),
-        why: e.to_string(),
-    })?;
+    let file = out
+        .model_file(data_path, command)
+        .map_err(|e| FrfitError::Fit {
+            what: "model file".into(),
+            why: e.to_string(),
+        })?;
     if let Some(parent) = model_path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| FrfitError::io(parent, e))?;
     }
@@ -43,16 +28,7 @@ pub fn write_outputs(
     })?;
     if let Some(dir) = report {
         let title = format!("frfit {} of {}", out.summary.command, data_path.display());
-        let input = ReportInput {
-            data: &out.band,
-            noise_var: Some(&out.noise.variance),
-            cmif: &out.cmif,
-            peaks: &out.peaks,
-            initial: &out.initial_response,
-            final_model: &out.final_response,
-            steps: &out.step_responses,
-            title: &title,
-        };
+        let input = out.report_input(&title);
         write_report(dir, &input, &out.summary)?;
     }
     Ok(())
