@@ -2,69 +2,20 @@
 //! rigid-body detection, the initialisation of section 3.3/4.4, the RIV iterations of
 //! Algorithm 1 and the adaptation of the set of modes.
 
+use crate::chain::{CmifInit, CmifInitConfig, RivRefine, RivRefineConfig};
 use crate::init::{initial_model, InitConfig, RigidBody};
-use crate::riv::{iterate, RivConfig};
+use crate::riv::RivConfig;
 use crate::significance::{f_critical, f_statistic, noise_scale};
-use crate::structure::{adapt_modes, AdaptConfig, AdaptReport};
-use crate::{AdditiveModel, Domain, FitData, KnownFactor, RivError};
-use frf_data::cmif::{cmif, pick_peaks, CmifPeak, PeakConfig};
-use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
-use frf_data::{Estimator, Fit, FrfDataset, ModelStructure, ProgressSink};
+use crate::structure::{AdaptConfig, AdaptReport};
+use crate::{AdditiveModel, FitData, RivError};
+use frf_data::cmif::{CmifPeak, PeakConfig};
+use frf_data::delay::{DelayConfig, DelayEstimate};
+use frf_data::{ChainModel, Estimator, Fit, FrfDataset, ModelStructure, ProgressSink};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
-/// Which modes to start from.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ModeSelection {
-    /// Every peak the CMIF picker accepts (the default).
-    #[default]
-    Auto,
-    /// The `n` most prominent CMIF peaks (the user declares how many modes to expect).
-    Count(usize),
-    /// These frequencies (Hz), e.g. from a finite-element model.
-    Frequencies(Vec<f64>),
-}
-
-/// How the sampled measurement is modelled.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Hold {
-    /// A continuous-time model (with the delay as a known factor): the paper's
-    /// delay-compensated fit. The default.
-    #[default]
-    None,
-    /// The exact zero-order hold at sample rate `fs_hz`: the model is fitted as the
-    /// hold's image in the shift variable and mapped back to continuous time exactly.
-    Zoh {
-        /// Sample rate, Hz.
-        fs_hz: f64,
-    },
-    /// The hold's amplitude `sinc(w / 2 fs)` as a known factor on a continuous model
-    /// (its half-sample phase is part of the delay). An approximation of `Zoh`.
-    Sinc {
-        /// Sample rate, Hz.
-        fs_hz: f64,
-    },
-}
-
-/// How the input/output delay is handled.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum DelayChoice {
-    /// Estimated from the data (delay periodogram), then refined as a free parameter of
-    /// the iterations (the default). With the exact hold, the hold's half sample is
-    /// taken out of the estimate.
-    #[default]
-    Auto,
-    /// No delay.
-    None,
-    /// A known delay in seconds (the part not explained by a modelled hold), not refined.
-    Fixed {
-        /// Seconds.
-        seconds: f64,
-    },
-}
+pub use frf_data::{DelayChoice, ModeSelection};
+pub use realize::Hold;
 
 /// Settings of [`AdditiveFitter`], with documented defaults.
 #[derive(Debug, Clone)]
@@ -205,8 +156,9 @@ impl AdditiveFitter {
         }
     }
 
-    /// [`fit`](Self::fit) in one pass; `delay_start` replaces the delay estimate of
-    /// [`DelayChoice::Auto`] (the delay is still refined).
+    /// [`fit`](Self::fit) in one pass: [`CmifInit`] then [`RivRefine`] on its additive
+    /// structure; `delay_start` replaces the delay estimate of [`DelayChoice::Auto`] (the
+    /// delay is still refined).
     fn fit_from<D: FrfDataset + ?Sized + Sync>(
         &self,
         data: &D,
@@ -214,128 +166,49 @@ impl AdditiveFitter {
     ) -> Result<(Fit<AdditiveModel>, FitterReport), RivError> {
         let cfg = &self.config;
         let t0 = Instant::now();
-        let mut timings = Vec::new();
-        let weighting = cfg.riv.weighting.resolve(data);
-        let fd = FitData::new(data, &weighting)?;
-        let mut report = FitterReport {
-            weighting: weighting.name().to_string(),
-            band_hz: fd.band_hz,
-            ..Default::default()
+        let delay = match (cfg.delay, delay_start) {
+            (DelayChoice::Auto, Some(seconds)) => DelayChoice::Start { seconds },
+            (d, _) => d,
         };
-        cfg.progress
-            .step("prepare", 1, Some(5), None, "data and weights");
-        // 1. delay and domain
-        let (domain, sinc) = match cfg.hold {
-            Hold::None => (Domain::Continuous, None),
-            Hold::Zoh { fs_hz } => {
-                check_fs(fs_hz, fd.band_hz.1)?;
-                (Domain::ZohDiscrete { ts: 1.0 / fs_hz }, None)
-            }
-            Hold::Sinc { fs_hz } => {
-                check_fs(fs_hz, fd.band_hz.1)?;
-                (Domain::Continuous, Some(fs_hz))
-            }
-        };
-        let (delay_s, fit_delay) = match cfg.delay {
-            DelayChoice::None => (0.0, false),
-            DelayChoice::Fixed { seconds } => (seconds, false),
-            DelayChoice::Auto if delay_start.is_some() => (delay_start.unwrap_or(0.0), true),
-            DelayChoice::Auto => {
-                let t = Instant::now();
-                let est = estimate_delay(data, &cfg.delay_config)?;
-                timings.push(("delay", t.elapsed()));
-                let hold_share = match cfg.hold {
-                    Hold::Zoh { fs_hz } => 0.5 / fs_hz,
-                    _ => 0.0,
-                };
-                let tau = est.tau_s - hold_share;
-                report.delay_estimate = Some(est);
-                (tau, true)
-            }
-        };
-        let factor = KnownFactor {
-            delay_s,
-            fit_delay,
+        let init = CmifInit::new(CmifInitConfig {
+            modes: cfg.modes.clone(),
+            peaks: cfg.peaks.clone(),
+            hold: cfg.hold,
+            delay,
+            delay_config: cfg.delay_config.clone(),
             derivative_order: cfg.derivative_order,
-            sinc_hold_fs: sinc,
-        };
-        cfg.progress
-            .step("cmif", 2, Some(5), None, "mode indicator");
-        // 2. modes
-        let t = Instant::now();
-        let freqs: Vec<f64> = match &cfg.modes {
-            ModeSelection::Frequencies(f) => f.clone(),
-            sel => {
-                let c = cmif(data)?;
-                let mut pc = cfg.peaks.clone();
-                if let ModeSelection::Count(n) = sel {
-                    pc.n_modes = Some(*n);
-                }
-                let peaks = pick_peaks(&c, &pc);
-                let f = peaks.iter().map(|p| p.f_hz).collect();
-                report.cmif_peaks = peaks;
-                f
-            }
-        };
-        timings.push(("cmif", t.elapsed()));
-        // 3. initialisation (rigid body chosen by comparing fits when automatic)
-        let t = Instant::now();
-        let base = InitConfig {
-            domain,
-            factor,
             rigid_body: cfg.rigid_body,
             feedthrough: cfg.feedthrough,
             zeta0: cfg.zeta0,
-            first_order_numerators: false,
-        };
-        let init = match cfg.rigid_body {
-            RigidBody::Auto => choose_rigid_body(&fd, &freqs, &base)?,
-            _ => initial_model(&fd, &freqs, &base)?,
-        };
-        report.integrators = init
-            .model
-            .submodels
-            .iter()
-            .map(|s| s.integrators)
-            .max()
-            .unwrap_or(0);
-        report.init_cost = init.final_cost().unwrap_or(f64::NAN);
-        timings.push(("init", t.elapsed()));
+            weighting: cfg.riv.weighting.clone(),
+            progress: cfg.progress.clone(),
+        })
+        .estimate(data, ())?;
         cfg.progress
             .step("riv", 3, Some(5), None, "refined IV iterations");
-        // 4. refinement (and adaptation of the modes)
         let t = Instant::now();
-        let mut riv = cfg.riv.clone();
-        riv.weighting = weighting.clone();
-        let mut fit = match &cfg.adapt {
-            Some(a) => {
-                let (f, rep) = adapt_modes(init.model, &fd, &riv, a)?;
-                report.adapt = Some(rep);
-                f
-            }
-            None => iterate(init.model, &fd, &riv)?,
-        };
-        timings.push(("refine", t.elapsed()));
+        let start = ChainModel::of(&init.model)?;
+        let refined = RivRefine::new(RivRefineConfig {
+            riv: cfg.riv.clone(),
+            adapt: cfg.adapt.clone(),
+            ..Default::default()
+        })
+        .estimate(data, start)?;
+        let t_refine = t.elapsed();
         cfg.progress
-            .step("done", 5, Some(5), fit.final_cost(), "fit finished");
+            .step("done", 5, Some(5), refined.final_cost(), "fit finished");
+        let ir = init.report;
+        let report = FitterReport {
+            cmif_peaks: ir.cmif_peaks,
+            delay_estimate: ir.delay_estimate,
+            integrators: ir.integrators,
+            weighting: ir.weighting,
+            init_cost: ir.init_cost,
+            adapt: refined.report.adapt.clone(),
+            band_hz: ir.band_hz,
+        };
         let mut messages = init.messages;
-        if let Some(d) = &report.delay_estimate {
-            messages.push(format!(
-                "delay estimate {:.2} us (coherence {:.2}); {} the iterations",
-                d.tau_s * 1e6,
-                d.coherence,
-                if fit_delay {
-                    "refined in"
-                } else {
-                    "fixed during"
-                }
-            ));
-        }
-        messages.push(format!(
-            "{} CMIF peaks started the fit; weighting: {}",
-            freqs.len(),
-            weighting.name()
-        ));
+        let mut fit = refined.with_report(());
         messages.append(&mut fit.messages);
         fit.messages = messages;
         fit.estimator = format!(
@@ -344,18 +217,18 @@ impl AdditiveFitter {
                 crate::IvMethod::Riv => "RIV, Algorithm 1",
                 crate::IvMethod::Sk => "SK iterations",
             },
-            weighting.name()
+            report.weighting
         );
-        fit.timings.clear();
-        for (stage, d) in timings {
-            fit.push_timing(stage, d);
-        }
+        let mut timings = init.timings;
+        timings.retain(|t| t.stage != "total");
+        fit.timings = timings;
+        fit.push_timing("refine", t_refine);
         fit.push_timing("total", t0.elapsed());
         Ok((fit, report))
     }
 }
 
-fn check_fs(fs_hz: f64, f_max: f64) -> Result<(), RivError> {
+pub(crate) fn check_fs(fs_hz: f64, f_max: f64) -> Result<(), RivError> {
     if !(fs_hz.is_finite() && fs_hz > 0.0) {
         return Err(RivError::invalid(
             "hold sample rate",
@@ -378,7 +251,7 @@ fn check_fs(fs_hz: f64, f_max: f64) -> Result<(), RivError> {
 
 /// Initialises with 0, 1 and 2 integrators and keeps the simplest one that no richer
 /// one beats significantly (F test at 1e-3 on the numerator fit (24)).
-fn choose_rigid_body(
+pub(crate) fn choose_rigid_body(
     fd: &FitData,
     freqs: &[f64],
     base: &InitConfig,
@@ -442,13 +315,14 @@ fn choose_rigid_body(
 impl Estimator for AdditiveFitter {
     type Model = AdditiveModel;
     type Start = ();
+    type Report = FitterReport;
     type Error = RivError;
 
     fn estimate<D: FrfDataset + ?Sized + Sync>(
         &self,
         data: &D,
         _start: (),
-    ) -> Result<Fit<AdditiveModel>, RivError> {
-        self.fit(data).map(|(f, _)| f)
+    ) -> Result<Fit<AdditiveModel, FitterReport>, RivError> {
+        self.fit(data).map(|(f, r)| f.with_report(r))
     }
 }

@@ -18,12 +18,14 @@
 //!   insignificant ones, so that a plain fit holds every mode the data show.
 
 pub mod augment;
+pub mod chain;
 pub mod error;
 pub mod fitter;
 pub mod init;
 pub mod model;
 pub mod model_json;
 
+pub use chain::{CmifInit, CmifInitConfig, CmifInitReport, RivRefine, RivRefineConfig, RivReport};
 pub use error::RivError;
 pub use model::{
     AdditiveModel, Domain, DynamicsFactor, FactorTarget, KnownFactor, ModeInfo, Submodel,

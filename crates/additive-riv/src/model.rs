@@ -22,6 +22,7 @@
 use crate::RivError;
 use faer::Mat;
 use frf_data::{FrfError, ModelStructure, C64};
+pub use realize::{DynamicsFactor, FactorTarget};
 use realize::{ModalModel, PolePair, RealPole};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
@@ -257,77 +258,6 @@ impl KnownFactor {
             && !self.fit_delay
             && self.derivative_order == 0
             && self.sinc_hold_fs.is_none()
-    }
-}
-
-/// Which entries a [`DynamicsFactor`] multiplies.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(tag = "kind", content = "index", rename_all = "snake_case")]
-pub enum FactorTarget {
-    /// Column `j` (0-based): the dynamics of actuator `j`.
-    Input(usize),
-    /// Row `i` (0-based): the dynamics of sensor `i`.
-    Output(usize),
-    /// Every entry: dynamics common to all actuators (or all sensors).
-    All,
-}
-
-/// A fitted dynamics factor `1 / A(x)` (unit DC gain, `A(x) = 1 + a~_1 x + ...`,
-/// `x = s / scale`) multiplying one input column, one output row or every entry:
-/// actuator or sensor dynamics (a first- or second-order low-pass, say), which no sum
-/// of submodels can represent. Its coefficients are shared parameters of the
-/// iterations, like a fitted delay.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct DynamicsFactor {
-    /// The entries it multiplies.
-    pub target: FactorTarget,
-    /// `a~_1 .. a~_n` (scaled).
-    pub den: Vec<f64>,
-    /// `sigma` of `x = s / sigma`, rad/s.
-    pub scale: f64,
-}
-
-impl DynamicsFactor {
-    /// A first-order low-pass with corner `f_hz`: `1 / (1 + s / w_c)`.
-    pub fn first_order(target: FactorTarget, f_hz: f64) -> Self {
-        Self {
-            target,
-            den: vec![1.0],
-            scale: TAU * f_hz,
-        }
-    }
-    /// A second-order low-pass `1 / (1 + 2 zeta s / w + s^2 / w^2)`.
-    pub fn second_order(target: FactorTarget, f_hz: f64, zeta: f64) -> Self {
-        Self {
-            target,
-            den: vec![2.0 * zeta, 1.0],
-            scale: TAU * f_hz,
-        }
-    }
-    /// `A(j w / scale)`.
-    #[inline]
-    pub fn den_at(&self, omega: f64) -> C64 {
-        let x = C64::new(0.0, omega / self.scale);
-        let mut acc = C64::new(0.0, 0.0);
-        for &a in self.den.iter().rev() {
-            acc = (acc + a) * x;
-        }
-        acc + 1.0
-    }
-    /// True when the factor multiplies entry (`i`, `j`).
-    #[inline]
-    pub fn affects(&self, i: usize, j: usize) -> bool {
-        match self.target {
-            FactorTarget::Input(c) => c == j,
-            FactorTarget::Output(r) => r == i,
-            FactorTarget::All => true,
-        }
-    }
-    /// The poles of the factor, rad/s.
-    pub fn poles(&self) -> Vec<C64> {
-        poly_roots_ascending(&self.den)
-            .map(|r| r.into_iter().map(|x| x * self.scale).collect())
-            .unwrap_or_default()
     }
 }
 
@@ -664,7 +594,7 @@ impl AdditiveModel {
         let mut f = self.factor.at(omega);
         for d in &self.dynamics {
             if d.affects(i, j) {
-                f /= d.den_at(omega);
+                f *= d.at(omega);
             }
         }
         f
@@ -1172,52 +1102,13 @@ fn check_distinct(roots: &[C64]) -> Result<(), RivError> {
     Ok(())
 }
 
-/// Roots of `1 + c_1 x + ... + c_n x^n` (coefficients ascending, constant 1 implied).
+/// Roots of `1 + c_1 x + ... + c_n x^n` (coefficients ascending, constant 1 implied);
+/// see [`realize::poly::roots_ascending`].
 pub fn poly_roots_ascending(c: &[f64]) -> Result<Vec<C64>, RivError> {
-    let n = c.len();
-    let cn = c[n - 1];
-    if cn == 0.0 || !cn.is_finite() {
-        return Err(RivError::Numerical {
-            what: "denominator roots".into(),
-            why: format!("leading coefficient is {cn}"),
-        });
-    }
-    match n {
-        1 => Ok(vec![C64::new(-1.0 / cn, 0.0)]),
-        2 => {
-            // cn x^2 + c1 x + 1
-            let (a, b) = (cn, c[0]);
-            let disc = b * b - 4.0 * a;
-            if disc >= 0.0 {
-                // stable formula
-                let sq = disc.sqrt();
-                let t = -0.5 * (b + b.signum() * sq);
-                let t = if t == 0.0 { -0.5 * sq } else { t };
-                Ok(vec![C64::new(t / a, 0.0), C64::new(1.0 / t, 0.0)])
-            } else {
-                let re = -b / (2.0 * a);
-                let im = (-disc).sqrt() / (2.0 * a.abs());
-                Ok(vec![C64::new(re, im), C64::new(re, -im)])
-            }
-        }
-        _ => {
-            // companion matrix of the monic polynomial x^n + (c_{n-1}/c_n) x^{n-1} + ...
-            let mut comp = Mat::<f64>::zeros(n, n);
-            for i in 1..n {
-                comp[(i, i - 1)] = 1.0;
-            }
-            for i in 0..n {
-                // coefficient of x^i in the monic polynomial
-                let coef = if i == 0 { 1.0 / cn } else { c[i - 1] / cn };
-                comp[(i, n - 1)] = -coef;
-            }
-            let ev = comp.eigenvalues().map_err(|e| RivError::Numerical {
-                what: "denominator roots".into(),
-                why: format!("eigenvalues of the companion matrix: {e:?}"),
-            })?;
-            Ok(ev.into_iter().map(|z| C64::new(z.re, z.im)).collect())
-        }
-    }
+    realize::poly::roots_ascending(c).map_err(|e| RivError::Numerical {
+        what: "denominator roots".into(),
+        why: e.to_string(),
+    })
 }
 
 impl ModelStructure for AdditiveModel {
@@ -1303,7 +1194,7 @@ impl ModelStructure for AdditiveModel {
             }
         }
         for d in &self.dynamics {
-            let h = d.den_at(omega).inv();
+            let h = d.at(omega);
             for j in 0..self.nu {
                 for i in 0..self.ny {
                     if d.affects(i, j) {
@@ -1312,6 +1203,16 @@ impl ModelStructure for AdditiveModel {
                 }
             }
         }
+    }
+    fn to_frf_model(&self) -> Result<realize::FrfModel, FrfError> {
+        self.to_frf_model_exact().map_err(|e| match e {
+            RivError::Data(d) => d,
+            RivError::Realize(r) => FrfError::Realize(r),
+            other => FrfError::Numerical {
+                what: "additive model to the model currency".into(),
+                why: other.to_string(),
+            },
+        })
     }
     fn to_modal(&self) -> Result<ModalModel, FrfError> {
         self.to_modal_model().map_err(|e| match e {

@@ -407,10 +407,11 @@ impl Basis {
             for dynf in &model.dynamics {
                 let a = dynf.den_at(w);
                 let ia = a.inv();
+                let h = dynf.num_at(w) * ia;
                 for j in 0..nu {
                     for i in 0..ny {
                         if dynf.affects(i, j) {
-                            f[(j * ny + i) * n + k] *= ia;
+                            f[(j * ny + i) * n + k] *= h;
                         }
                     }
                 }

@@ -76,6 +76,7 @@ impl AdditiveRiv {
 impl Estimator for AdditiveRiv {
     type Model = AdditiveModel;
     type Start = Fit<AdditiveModel>;
+    type Report = ();
     type Error = RivError;
 
     fn estimate<D: FrfDataset + ?Sized + Sync>(

@@ -70,11 +70,18 @@ pub struct Timing {
     pub seconds: f64,
 }
 
-/// The result of an [`Estimator`]: the model and how it was obtained.
+/// The result of an [`Estimator`]: the model, the method's own report, and how it was
+/// obtained.
+///
+/// `R` is the estimator's report type ([`Estimator::Report`]): what the method found on
+/// the way (CMIF peaks, the chosen order, singular values, parameter covariance...), so
+/// that nothing it computed is thrown away. `()` for a fit that carries none.
 #[derive(Debug, Clone)]
-pub struct Fit<M> {
+pub struct Fit<M, R = ()> {
     /// The estimated model.
     pub model: M,
+    /// The estimator's own report.
+    pub report: R,
     /// The cost after each iteration (the first entry is the cost of the start).
     pub cost_history: Vec<f64>,
     /// Number of iterations run.
@@ -95,6 +102,7 @@ impl<M> Fit<M> {
     pub fn from_model(model: M, estimator: impl Into<String>) -> Self {
         Self {
             model,
+            report: (),
             cost_history: Vec::new(),
             iterations: 0,
             convergence: Convergence::Direct,
@@ -103,6 +111,9 @@ impl<M> Fit<M> {
             messages: Vec::new(),
         }
     }
+}
+
+impl<M, R> Fit<M, R> {
     /// The last cost, when any was recorded.
     pub fn final_cost(&self) -> Option<f64> {
         self.cost_history.last().copied()
@@ -114,6 +125,32 @@ impl<M> Fit<M> {
             seconds: d.as_secs_f64(),
         });
     }
+    /// The same fit with another report.
+    pub fn with_report<R2>(self, report: R2) -> Fit<M, R2> {
+        Fit {
+            model: self.model,
+            report,
+            cost_history: self.cost_history,
+            iterations: self.iterations,
+            convergence: self.convergence,
+            timings: self.timings,
+            estimator: self.estimator,
+            messages: self.messages,
+        }
+    }
+    /// The same fit with its model mapped by `f`.
+    pub fn map_model<M2>(self, f: impl FnOnce(M) -> M2) -> Fit<M2, R> {
+        Fit {
+            model: f(self.model),
+            report: self.report,
+            cost_history: self.cost_history,
+            iterations: self.iterations,
+            convergence: self.convergence,
+            timings: self.timings,
+            estimator: self.estimator,
+            messages: self.messages,
+        }
+    }
 }
 
 impl<M> From<M> for Fit<M> {
@@ -124,18 +161,25 @@ impl<M> From<M> for Fit<M> {
 
 /// An estimator: data (and a start, for refiners) in, a [`Fit`] out.
 ///
-/// Initialisers use `Start = ()`; refiners use `Start = Fit<M>` (or anything a `Fit`
-/// converts into), so that chaining reads as a pipeline without conversion code:
+/// Initialisers use `Start = ()`; refiners use `Start = `[`crate::ChainModel`] (the
+/// model currency, [`realize::FrfModel`], with the previous link's own structure when it
+/// has one), so that any initialiser feeds any refiner:
 ///
 /// ```text
-/// let init = CmifInit::default().estimate(&data, ())?;
-/// let fit = AdditiveRiv::default().estimate(&data, init)?;
+/// let init = SubspaceInit::default().estimate(&data, ())?;          // crate subspace
+/// let fit = MlRefine::default().estimate(&data, ChainModel::of(&init.model)?)?; // ml-refine
 /// ```
+///
+/// The object-safe [`crate::Initializer`] and [`crate::Refiner`] wrap estimators for a
+/// chain composed by name at run time (`frfit fit --init X --refine Y`).
 pub trait Estimator {
     /// The model family estimated.
     type Model: ModelStructure;
-    /// What the estimator starts from: `()` for initialisers, a `Fit` for refiners.
+    /// What the estimator starts from: `()` for initialisers, a [`crate::ChainModel`]
+    /// for refiners.
     type Start;
+    /// The method's own report (kept in [`Fit::report`]).
+    type Report: std::fmt::Debug + Clone + Serialize;
     /// The estimator's error type.
     type Error: std::error::Error + Send + Sync + 'static;
     /// Runs the estimator on `data`.
@@ -143,7 +187,7 @@ pub trait Estimator {
         &self,
         data: &D,
         start: Self::Start,
-    ) -> Result<Fit<Self::Model>, Self::Error>;
+    ) -> Result<Fit<Self::Model, Self::Report>, Self::Error>;
 }
 
 /// One progress report from a long-running step.

@@ -2,8 +2,9 @@
 //!
 //! - [`FrfDataset`] (implemented by the owning [`Frf`] and the zero-copy [`FrfView`]):
 //!   frequencies, `ny x nu` complex matrices per line, optional per-entry variance;
-//! - [`ModelStructure`] and [`Estimator`] with the [`Fit`] result: an initialiser's
-//!   `Fit` feeds a refiner's `estimate` directly;
+//! - [`ModelStructure`] and [`Estimator`] with the [`Fit`] result (and the method's own
+//!   report); the estimator chain ([`chain`]): [`Initializer`] and [`Refiner`] links that
+//!   hand on one model currency, [`realize::FrfModel`] ([`ChainModel`]);
 //! - weightings of the least-squares criterion ([`Weighting`]);
 //! - formats: the FRF CSV of `FORMATS.md` and UFF 58 ([`io`]);
 //! - the CMIF and its peak picker ([`cmif`]), delay estimation and compensation
@@ -11,7 +12,9 @@
 //! - simulated experiments (`synth`) and nonparametric FRF estimation from periodic data
 //!   (`nonparametric`).
 
+pub mod chain;
 pub mod cmif;
+pub mod currency;
 pub mod dataset;
 pub mod delay;
 pub mod error;
@@ -27,6 +30,10 @@ pub mod truth;
 pub mod view;
 pub mod weighting;
 
+pub use chain::{
+    ChainError, ChainModel, ChainOutput, ChainSettings, DelayChoice, InitLink, Initializer,
+    LinkReport, ModeSelection, RefineLink, Refiner,
+};
 pub use dataset::FrfDataset;
 pub use error::{FormatProblem, FrfError};
 pub use estimator::{Convergence, Estimator, Fit, Progress, ProgressFn, ProgressSink, Timing};

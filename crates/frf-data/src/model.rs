@@ -1,7 +1,7 @@
 //! The [`ModelStructure`] trait: a parametrised model family.
 
 use crate::{FrfDataset, FrfError, C64};
-use realize::{ModalModel, ResponseGrid};
+use realize::{FrfModel, ModalModel, ResponseGrid};
 
 /// A parametrised model family `P(s, theta)` with `ny` outputs and `nu` inputs.
 ///
@@ -26,6 +26,9 @@ pub trait ModelStructure: Clone + Send + Sync {
     fn response_into(&self, omega: f64, out: &mut [C64]);
     /// The rational part of the model as a [`ModalModel`].
     fn to_modal(&self) -> Result<ModalModel, FrfError>;
+    /// The model in the chain's currency ([`FrfModel`]: the rational part with its known
+    /// factors), which every refiner accepts and every file and report uses.
+    fn to_frf_model(&self) -> Result<FrfModel, FrfError>;
 
     /// The response at the angular frequencies `omega` (rad/s).
     fn response_at(&self, omega: &[f64]) -> ResponseGrid {

@@ -12,6 +12,8 @@
 //!   frequency response of a continuous model seen through a ZOH sampler with an extra
 //!   delay of `d` samples ([`zoh`]), with the matrix exponential of [`expm`] (Higham's
 //!   2005 scaling and squaring);
+//! - [`FrfModel`]: the model currency of the estimator chain, a [`ModalModel`] with its
+//!   [`KnownFactors`] (delay, derivative order, hold, input/output dynamics, crosstalk);
 //! - conversions between [`ModalModel`] and a real block-diagonal [`StateSpace`]
 //!   ([`convert`]: minimal realization by residue ranks, modal decomposition that
 //!   handles integrator chains exactly).
@@ -30,14 +32,19 @@
 pub mod convert;
 pub mod error;
 pub mod expm;
+pub mod factors;
+pub mod frf_model;
 pub mod grid;
 pub mod hessenberg;
 pub mod modal;
+pub mod poly;
 pub mod state_space;
 pub mod zoh;
 
 pub use convert::DEFAULT_ZERO_TOL;
 pub use error::RealizeError;
+pub use factors::{DynamicsFactor, FactorTarget, Hold, KnownFactors};
+pub use frf_model::FrfModel;
 pub use grid::ResponseGrid;
 pub use hessenberg::HessenbergForm;
 pub use modal::{ModalModel, PolePair, RealPole};
