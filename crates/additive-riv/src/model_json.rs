@@ -106,6 +106,14 @@ pub struct Provenance {
     pub frfit_version: String,
     /// Free-form notes (messages of the fit).
     pub notes: Vec<String>,
+    /// The estimator chain that made the model (`["cmif", "riv"]`), when it came from
+    /// one.
+    #[serde(default)]
+    pub chain: Vec<String>,
+    /// Each link's report (iterations, convergence, cost history, timings, notes and the
+    /// method's own details), in the order of `chain`.
+    #[serde(default)]
+    pub links: Vec<frf_data::LinkReport>,
 }
 
 /// The model file, schema version 1.

@@ -5,6 +5,7 @@
 //! the `frfit` command-line tool. The estimators live in their own crates and are
 //! re-exported here so that a user can depend on `frfit` alone.
 
+pub mod chain;
 pub mod declared;
 pub mod error;
 pub mod pipeline;

@@ -99,6 +99,10 @@ pub struct PipelineConfig {
     /// A model to start from (from `--model MODEL.json`) instead of the CMIF
     /// initialisation.
     pub start_model: Option<AdditiveModel>,
+    /// The initialiser of the chain (see [`crate::chain::INITIALIZERS`]). Default: `cmif`.
+    pub init: String,
+    /// The refiner of the chain (see [`crate::chain::REFINERS`]). Default: `riv`.
+    pub refine: String,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -119,6 +123,8 @@ impl Default for PipelineConfig {
             alpha: 1e-3,
             min_f: 25.0,
             start_model: None,
+            init: "cmif".into(),
+            refine: "riv".into(),
             progress: ProgressSink::none(),
         }
     }
@@ -133,6 +139,11 @@ pub struct PipelineOutput {
     pub fit: Fit<AdditiveModel>,
     /// What the fitter found on the way.
     pub fitter_report: FitterReport,
+    /// The links of the chain that made the first model and their reports (empty when
+    /// the run started from a given model).
+    pub chain: Vec<String>,
+    /// Each link's report.
+    pub links: Vec<frf_data::LinkReport>,
     /// The noise level used.
     pub noise: NoiseLevel,
     /// CMIF of the band.
@@ -174,6 +185,8 @@ impl PipelineOutput {
             cost: self.fit.final_cost(),
             frfit_version: format!("{} ({producer})", env!("CARGO_PKG_VERSION")),
             notes: self.fit.messages.clone(),
+            chain: self.chain.clone(),
+            links: self.links.clone(),
         };
         let band = self.summary.data.band_hz;
         additive_riv::ModelFile::from_model(
@@ -735,6 +748,100 @@ fn refit(
     Ok((f.model, c))
 }
 
+/// The first fit through the estimator chain `cfg.init -> cfg.refine` ([`crate::chain`]):
+/// the additive model the diagnosis continues from (the chain's own additive structure
+/// when its last link has one, otherwise the currency's structure with numerators by
+/// eq. 24), what the fitter found on the way, the chain's names and each link's report.
+fn first_fit_by_chain(
+    band: &Frf,
+    fitter_cfg: &FitterConfig,
+    cfg: &PipelineConfig,
+) -> Result<
+    (
+        Fit<AdditiveModel>,
+        FitterReport,
+        Vec<String>,
+        Vec<frf_data::LinkReport>,
+    ),
+    FrfitError,
+> {
+    let settings = frf_data::ChainSettings {
+        hold: fitter_cfg.hold,
+        delay: fitter_cfg.delay,
+        derivative_order: fitter_cfg.derivative_order,
+        weighting: fitter_cfg.riv.weighting.clone(),
+        modes: fitter_cfg.modes.clone(),
+        peaks: fitter_cfg.peaks.clone(),
+        order: None,
+        progress: fitter_cfg.progress.clone(),
+    };
+    let opts = crate::chain::AdditiveOptions {
+        riv: fitter_cfg.riv.clone(),
+        adapt: fitter_cfg.adapt.clone(),
+        rigid_body: fitter_cfg.rigid_body,
+    };
+    let result = crate::chain::run_chain(band, &cfg.init, &cfg.refine, &settings, &opts)?;
+    let model = match result.model.native::<AdditiveModel>() {
+        Some(m) => m.clone(),
+        None => {
+            let fd =
+                FitData::new(band, &fitter_cfg.riv.weighting.resolve(band)).map_err(err("fit"))?;
+            let (mut m, _) = AdditiveModel::from_frf_model(&result.model.model, fd.band_hz, 0.01)
+                .map_err(err("fit"))?;
+            fit_numerators(&mut m, &fd).map_err(err("fit"))?;
+            m
+        }
+    };
+    let mut report = FitterReport::default();
+    for l in &result.links {
+        if let Ok(r) = serde_json::from_value::<additive_riv::CmifInitReport>(l.details.clone()) {
+            report.cmif_peaks = r.cmif_peaks;
+            report.delay_estimate = r.delay_estimate;
+            report.integrators = r.integrators;
+            report.weighting = r.weighting;
+            report.init_cost = r.init_cost;
+            report.band_hz = r.band_hz;
+        } else if let Ok(r) = serde_json::from_value::<additive_riv::RivReport>(l.details.clone()) {
+            report.weighting = r.weighting;
+            report.adapt = r.adapt;
+        }
+    }
+    let last = result
+        .links
+        .last()
+        .cloned()
+        .ok_or_else(|| FrfitError::Fit {
+            what: "chain".into(),
+            why: "no link ran".into(),
+        })?;
+    let mut messages: Vec<String> = result
+        .links
+        .iter()
+        .flat_map(|l| l.messages.clone())
+        .collect();
+    messages.extend(result.notes.iter().cloned());
+    let fit = Fit {
+        model,
+        report: (),
+        cost_history: last.cost_history.clone(),
+        iterations: result.links.iter().map(|l| l.iterations).sum(),
+        convergence: last.convergence.clone(),
+        timings: result
+            .links
+            .iter()
+            .flat_map(|l| l.timings.clone())
+            .collect(),
+        estimator: result
+            .links
+            .iter()
+            .map(|l| format!("{}: {}", l.link, l.estimator))
+            .collect::<Vec<_>>()
+            .join(" -> "),
+        messages,
+    };
+    Ok((fit, report, result.chain, result.links))
+}
+
 /// Runs the pipeline on `data` (read from `path`) for `command` (`fit` or `diagnose`).
 pub fn run(
     data: &Frf,
@@ -843,10 +950,15 @@ pub fn run(
         },
         ..fitter_cfg.clone()
     };
+    let mut chain_names = Vec::new();
+    let mut chain_links = Vec::new();
     let (mut fit, fitter_report) = match &cfg.start_model {
-        None => AdditiveFitter::new(fitter_cfg)
-            .fit(&band)
-            .map_err(err("fit"))?,
+        None => {
+            let r = first_fit_by_chain(&band, &fitter_cfg, cfg)?;
+            chain_names = r.2;
+            chain_links = r.3;
+            (r.0, r.1)
+        }
         Some(m) => {
             let fd = FitData::new(&band, &cfg.weighting.resolve(&band)).map_err(err("fit"))?;
             let mut m = m.clone();
@@ -1316,12 +1428,15 @@ pub fn run(
             .then(|| data_noise_rel(&band, &noise))
             .flatten(),
         timings,
+        chain: chain_names.clone(),
     };
     let peaks = fitter_report.cmif_peaks.clone();
     Ok(PipelineOutput {
         band,
         fit,
         fitter_report,
+        chain: chain_names,
+        links: chain_links,
         noise,
         cmif: c,
         peaks,

@@ -181,4 +181,9 @@ pub struct Summary {
     pub data_noise_median_rel: Option<f64>,
     /// Time per stage.
     pub timings: Vec<StageTime>,
+    /// The estimator chain that made the first model (`["cmif", "riv"]`); empty when the
+    /// run started from a given model. Each link's report is in the model file's
+    /// `provenance.links`.
+    #[serde(default)]
+    pub chain: Vec<String>,
 }

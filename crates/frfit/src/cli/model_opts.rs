@@ -129,6 +129,13 @@ pub struct FitOptions {
     /// Iterations: refined IV (riv) or SK.
     #[arg(long, value_enum, default_value_t = Method::Riv)]
     pub method: Method,
+    /// Initialiser of the estimator chain: `cmif` (CMIF peaks + convex numerators).
+    #[arg(long, default_value = "cmif", value_name = "NAME")]
+    pub init: String,
+    /// Refiner of the estimator chain: `riv` (refined IV with mode adaptation) or `none`
+    /// (the initialiser's model as it is).
+    #[arg(long, default_value = "riv", value_name = "NAME")]
+    pub refine: String,
     /// Weighting of the criterion.
     #[arg(long, value_enum, default_value_t = WeightingArg::Auto)]
     pub weighting: WeightingArg,
@@ -157,6 +164,8 @@ impl FitOptions {
                 WeightingArg::Magnitude => Weighting::InverseMagnitude,
                 WeightingArg::Uniform => Weighting::Uniform,
             },
+            init: self.init.clone(),
+            refine: self.refine.clone(),
             frf_type: match self.frf_type {
                 FrfTypeArg::Displacement => FrfType::Displacement,
                 FrfTypeArg::Velocity => FrfType::Velocity,
