@@ -13,7 +13,7 @@
 //! `K(z) = T_u c(z) T_y` (`nu x ny`), and the loop is `u = r - K y_measured`.
 
 use super::plant::{low_rank_factors, ModalPlant};
-use crate::{FrfError, C64};
+use frf_data::{FrfError, C64};
 use faer::Mat;
 use std::f64::consts::TAU;
 

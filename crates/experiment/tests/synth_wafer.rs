@@ -5,8 +5,8 @@
 use faer::Mat;
 use frf_data::cmif::{cmif, pick_peaks, PeakConfig};
 use frf_data::io::read_frf_csv;
-use frf_data::nonparametric::EstimatorConfig;
-use frf_data::synth::*;
+use ::experiment::nonparametric::EstimatorConfig;
+use ::experiment::synth::*;
 use frf_data::truth::Truth;
 use frf_data::FrfDataset;
 

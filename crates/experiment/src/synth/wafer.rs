@@ -15,8 +15,8 @@
 //! seeded ChaCha8 stream, so a seed gives the same plant on every platform.
 
 use super::plant::{ModalPlant, ModalPlantBuilder};
-use crate::truth::Truth;
-use crate::FrfError;
+use frf_data::truth::Truth;
+use frf_data::FrfError;
 use faer::Mat;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

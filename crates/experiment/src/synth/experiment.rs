@@ -36,7 +36,7 @@ use crate::nonparametric::{
     Accumulator, EstimatorConfig, LineGrid, NonparametricFrf, PeriodicSpectra, RealizationSpectra,
     TimeRecords,
 };
-use crate::{Frf, FrfError, C64};
+use frf_data::{Frf, FrfError, C64};
 use faer::Mat;
 use rayon::prelude::*;
 

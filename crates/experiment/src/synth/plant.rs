@@ -7,8 +7,8 @@
 //! rank-one residue made of sensor gains `c` and actuator gains `b`, and an optional
 //! feedthrough `D`.
 
-use crate::truth::{Truth, TruthMode, TruthModel};
-use crate::{FrfError, C64};
+use frf_data::truth::{Truth, TruthMode, TruthModel};
+use frf_data::{FrfError, C64};
 use faer::Mat;
 use realize::{ModalModel, PolePair, ResponseGrid};
 use std::collections::BTreeMap;
