@@ -24,4 +24,4 @@ pub mod nonparametric;
 pub mod synth;
 
 pub use nonparametric::{estimate, EstimatorConfig, NonparametricFrf, PeriodicSpectra};
-pub use synth::{WaferStageExperiment, WaferStageConfig};
+pub use synth::{WaferStageConfig, WaferStageExperiment};

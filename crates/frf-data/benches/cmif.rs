@@ -16,7 +16,10 @@ fn cmif(c: &mut Criterion) {
         return;
     };
     let data = frf_data::io::read_frf(&path).expect("the reference CSV reads");
-    let band = data.band(20.0, 2000.0).expect("the band holds lines").to_frf();
+    let band = data
+        .band(20.0, 2000.0)
+        .expect("the band holds lines")
+        .to_frf();
     let mut g = c.benchmark_group("cmif");
     g.sample_size(20);
     for (name, method) in [("jacobi", SvdMethod::Jacobi), ("faer", SvdMethod::Faer)] {

@@ -15,9 +15,9 @@
 //! seeded ChaCha8 stream, so a seed gives the same plant on every platform.
 
 use super::plant::{ModalPlant, ModalPlantBuilder};
+use faer::Mat;
 use frf_data::truth::Truth;
 use frf_data::FrfError;
-use faer::Mat;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
