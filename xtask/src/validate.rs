@@ -4,7 +4,7 @@
 //! the rigid body and the delay; rendered as a console table and as `validation.md`.
 
 use crate::{Context, Error};
-use frf_data::synth::truth_delay_samples;
+use experiment::synth::truth_delay_samples;
 use frf_data::truth::Truth;
 use frf_data::{Frf, FrfDataset, ModelStructure, C64};
 use frfit::additive_riv::{Domain, ModelFile};

@@ -11,7 +11,9 @@
 use crate::validate::{self, Validation};
 use crate::{Context, Error};
 use clap::Args as ClapArgs;
-use frf_data::synth::{ControllerConfig, ExperimentConfig, WaferStageConfig, WaferStageExperiment};
+use experiment::synth::{
+    ControllerConfig, ExperimentConfig, WaferStageConfig, WaferStageExperiment,
+};
 use frf_data::truth::Truth;
 use frf_data::{FrfDataset, ProgressSink};
 use frfit::additive_riv::{Hold, ModelFile};

@@ -6,11 +6,16 @@
 //!   report); the estimator chain ([`chain`]): [`Initializer`] and [`Refiner`] links that
 //!   hand on one model currency, [`realize::FrfModel`] ([`ChainModel`]);
 //! - weightings of the least-squares criterion ([`Weighting`]);
-//! - formats: the FRF CSV of `FORMATS.md` and UFF 58 ([`io`]);
+//! - formats: the FRF CSV of `FORMATS.md` and UFF 58 ([`io`]), the truth JSON of
+//!   simulated and reference plants ([`truth`]);
 //! - the CMIF and its peak picker ([`cmif`]), delay estimation and compensation
 //!   ([`delay`]);
-//! - simulated experiments (`synth`) and nonparametric FRF estimation from periodic data
-//!   (`nonparametric`).
+//! - locating the shared reference data for tests ([`shared_data`]).
+//!
+//! It depends on `realize` (models) and the numerics only: an estimator crate needs
+//! `frf-data` and `realize` and nothing heavier. Simulated plants and experiments and the
+//! nonparametric FRF estimation from periodic data (FFT, random streams, MATLAB files)
+//! are in the `experiment` crate.
 
 pub mod chain;
 pub mod cmif;
@@ -21,11 +26,8 @@ pub mod error;
 pub mod estimator;
 pub mod frf;
 pub mod io;
-pub mod matfile;
 pub mod model;
-pub mod nonparametric;
 pub mod shared_data;
-pub mod synth;
 pub mod truth;
 pub mod view;
 pub mod weighting;

@@ -4,8 +4,8 @@
 //! realizations the variance came from, the residual analysis accounts for it, and a
 //! model at the noise level is called noise-limited. Simulated wafer stage, no files.
 
-use frf_data::nonparametric::{EstimatorConfig, LineGrid};
-use frf_data::synth::{
+use experiment::nonparametric::{EstimatorConfig, LineGrid};
+use experiment::synth::{
     ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
     WaferStageExperiment,
 };

@@ -22,7 +22,7 @@
 //! eigendecompositions and matrix products of the conversions follow faer's global
 //! setting, which applications should set to `Par::Seq` on small machines.
 //!
-//! `realize` depends on no other frfit crate: `frf-data` builds its simulated plants
+//! `realize` depends on no other frfit crate: `experiment` builds its simulated plants
 //! in these types, so it sits above this crate.
 //!
 //! Conventions: frequencies are angular (rad/s) unless a name ends in `_hz`; a

@@ -7,12 +7,12 @@
 //! its sign; `NAME:COL` takes column `COL` (1-based) of a matrix variable.
 
 use clap::Args as ClapArgs;
-use frf_data::matfile::MatFile;
-use frf_data::nonparametric::spectra_csv::read_spectra_csv;
-use frf_data::nonparametric::time_records::{
+use experiment::matfile::MatFile;
+use experiment::nonparametric::spectra_csv::read_spectra_csv;
+use experiment::nonparametric::time_records::{
     spectra_from_records, ExperimentRecords, RecordConfig,
 };
-use frf_data::nonparametric::{estimate, EstimatorConfig, PeriodicSpectra};
+use experiment::nonparametric::{estimate, EstimatorConfig, PeriodicSpectra};
 use frf_data::FrfDataset;
 use frfit::FrfitError;
 use std::path::{Path, PathBuf};

@@ -4,9 +4,9 @@
 //! truth JSON, the exact noiseless response and the per-period spectra.
 
 use clap::{Args as ClapArgs, Subcommand, ValueEnum};
-use frf_data::nonparametric::spectra_csv::write_spectra_csv;
-use frf_data::nonparametric::{EstimatorConfig, LineGrid};
-use frf_data::synth::{
+use experiment::nonparametric::spectra_csv::write_spectra_csv;
+use experiment::nonparametric::{EstimatorConfig, LineGrid};
+use experiment::synth::{
     ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
     WaferStageExperiment,
 };
@@ -147,7 +147,7 @@ fn run_wafer(a: WaferArgs, quiet: bool) -> Result<(), FrfitError> {
                 a.seed
             )],
         )?;
-        frf_data::nonparametric::estimate(&spectra, &est_cfg)?
+        experiment::nonparametric::estimate(&spectra, &est_cfg)?
     } else {
         w.experiment.estimate(path, &est_cfg)?
     };
@@ -274,7 +274,7 @@ mod tests {
         }
         assert!(e / v < 4.0, "{}", e / v);
         let spectra =
-            frf_data::nonparametric::spectra_csv::read_spectra_csv(dir.join("ws.spectra.csv"))
+            experiment::nonparametric::spectra_csv::read_spectra_csv(dir.join("ws.spectra.csv"))
                 .unwrap();
         assert_eq!(spectra.realizations.len(), 2);
         assert_eq!(spectra.n_experiments(), 13);

@@ -15,9 +15,9 @@
 //! seeded ChaCha8 stream, so a seed gives the same plant on every platform.
 
 use super::plant::{ModalPlant, ModalPlantBuilder};
-use crate::truth::Truth;
-use crate::FrfError;
 use faer::Mat;
+use frf_data::truth::Truth;
+use frf_data::FrfError;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -27,7 +27,7 @@
 
 use super::small::{invert, matmul, norm1};
 use super::{PeriodicSpectra, RealizationSpectra};
-use crate::{Frf, FrfError, C64};
+use frf_data::{Frf, FrfError, C64};
 use rayon::prelude::*;
 
 /// Settings of the estimator.
@@ -98,14 +98,14 @@ impl NonparametricFrf {
 
     /// The disturbance covariance `C_v` at line `k` (`ny x ny`, column-major).
     pub fn disturbance_at(&self, k: usize) -> Option<&[C64]> {
-        let ny = crate::FrfDataset::ny(&self.frf);
+        let ny = frf_data::FrfDataset::ny(&self.frf);
         self.disturbance_covariance
             .as_ref()
             .map(|c| &c[k * ny * ny..(k + 1) * ny * ny])
     }
 
     fn frf_entries(&self) -> usize {
-        crate::FrfDataset::n_entries(&self.frf)
+        frf_data::FrfDataset::n_entries(&self.frf)
     }
 }
 
@@ -439,7 +439,7 @@ pub fn estimate(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::FrfDataset;
+    use frf_data::FrfDataset;
     use proptest::prelude::*;
 
     /// Noise-free spectra `Y_p = G U_p` with inputs that change from period to period.

@@ -5,7 +5,7 @@
 
 use super::dft::{LineGrid, RealPairFft};
 use super::{PeriodicSpectra, RealizationSpectra};
-use crate::{FrfError, C64};
+use frf_data::{FrfError, C64};
 
 /// How to cut and analyse the records.
 #[derive(Debug, Clone, PartialEq)]

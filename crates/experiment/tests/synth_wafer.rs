@@ -2,11 +2,11 @@
 //! same plant, the truth JSON round-trips, the default experiment's CMIF shows the 17
 //! modes, and the truth of the reference data reproduces its noiseless response.
 
+use ::experiment::nonparametric::EstimatorConfig;
+use ::experiment::synth::*;
 use faer::Mat;
 use frf_data::cmif::{cmif, pick_peaks, PeakConfig};
 use frf_data::io::read_frf_csv;
-use frf_data::nonparametric::EstimatorConfig;
-use frf_data::synth::*;
 use frf_data::truth::Truth;
 use frf_data::FrfDataset;
 

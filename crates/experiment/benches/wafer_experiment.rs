@@ -5,7 +5,7 @@
 //! variances. Target: under 10 s on 2 cores in release.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use frf_data::synth::WaferStageExperiment;
+use experiment::synth::WaferStageExperiment;
 use std::hint::black_box;
 use std::time::Duration;
 

@@ -4,8 +4,8 @@
 //! Most tests use the default wafer stage with a short period (N = 2000 at 10 kHz:
 //! 200 odd lines 5..1995 Hz) so that many seeds run in well under a second each.
 
-use frf_data::nonparametric::{EstimatorConfig, LineGrid, NonparametricFrf};
-use frf_data::synth::*;
+use ::experiment::nonparametric::{EstimatorConfig, LineGrid, NonparametricFrf};
+use ::experiment::synth::*;
 use frf_data::{Frf, FrfDataset, FrfError, C64};
 
 fn stage() -> WaferStage {

@@ -36,8 +36,8 @@ use crate::nonparametric::{
     Accumulator, EstimatorConfig, LineGrid, NonparametricFrf, PeriodicSpectra, RealizationSpectra,
     TimeRecords,
 };
-use crate::{Frf, FrfError, C64};
 use faer::Mat;
+use frf_data::{Frf, FrfError, C64};
 use rayon::prelude::*;
 
 /// Which simulation path to run (see the module documentation).

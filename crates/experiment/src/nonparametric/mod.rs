@@ -24,7 +24,7 @@ pub mod time_records;
 pub use dft::LineGrid;
 pub use estimate::{estimate, Accumulator, EstimatorConfig, NonparametricFrf};
 
-use crate::{FrfError, C64};
+use frf_data::{FrfError, C64};
 
 /// Measured time records of one realization, after the transient: per experiment, one
 /// record per channel, `P N` samples.

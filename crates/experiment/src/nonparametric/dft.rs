@@ -6,7 +6,7 @@
 //! MATLAB's and numpy's `fft`, and the periodic spectra CSV of `FORMATS.md`). Ratios
 //! such as `G = Y / U` do not depend on it.
 
-use crate::{FrfError, C64};
+use frf_data::{FrfError, C64};
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
 

@@ -7,9 +7,9 @@
 //! rank-one residue made of sensor gains `c` and actuator gains `b`, and an optional
 //! feedthrough `D`.
 
-use crate::truth::{Truth, TruthMode, TruthModel};
-use crate::{FrfError, C64};
 use faer::Mat;
+use frf_data::truth::{Truth, TruthMode, TruthModel};
+use frf_data::{FrfError, C64};
 use realize::{ModalModel, PolePair, ResponseGrid};
 use std::collections::BTreeMap;
 use std::f64::consts::TAU;

@@ -7,7 +7,7 @@
 //! `fditools_motorbench_msA.mat`), `matrw` reports such variables as unsupported and
 //! reads the rest, including doubles stored in a compact integer type.
 
-use crate::{FormatProblem, FrfError};
+use frf_data::{FormatProblem, FrfError};
 use std::collections::BTreeMap;
 use std::path::Path;
 

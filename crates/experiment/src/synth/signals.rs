@@ -8,7 +8,7 @@
 //! depend on thread scheduling.
 
 use crate::nonparametric::LineGrid;
-use crate::{FrfError, C64};
+use frf_data::{FrfError, C64};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;

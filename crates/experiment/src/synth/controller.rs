@@ -13,8 +13,8 @@
 //! `K(z) = T_u c(z) T_y` (`nu x ny`), and the loop is `u = r - K y_measured`.
 
 use super::plant::{low_rank_factors, ModalPlant};
-use crate::{FrfError, C64};
 use faer::Mat;
+use frf_data::{FrfError, C64};
 use std::f64::consts::TAU;
 
 /// Tuning of the rigid-body loops; `Default`: 20 Hz crossover.

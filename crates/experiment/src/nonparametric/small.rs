@@ -2,7 +2,7 @@
 //! line: Gauss-Jordan inversion with partial pivoting and the 1-norm reciprocal
 //! condition number. Matrices are column-major slices.
 
-use crate::C64;
+use frf_data::C64;
 
 /// The inverse of the `n x n` column-major matrix `a`, or `None` when a pivot is
 /// exactly zero.

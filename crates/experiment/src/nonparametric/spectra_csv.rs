@@ -11,7 +11,7 @@
 //! 1-based and must be complete (every combination, every line).
 
 use super::{PeriodicSpectra, RealizationSpectra};
-use crate::{FormatProblem, FrfError, C64};
+use frf_data::{FormatProblem, FrfError, C64};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;

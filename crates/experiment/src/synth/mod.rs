@@ -30,7 +30,7 @@ pub use signals::NoiseConfig;
 pub use wafer::{beam_function, WaferStage, WaferStageConfig};
 
 use crate::nonparametric::{EstimatorConfig, NonparametricFrf};
-use crate::FrfError;
+use frf_data::FrfError;
 
 /// The wafer-stage testbed in its closed-loop experiment.
 #[derive(Debug)]

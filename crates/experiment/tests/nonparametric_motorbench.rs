@@ -3,13 +3,13 @@
 //! (`fditools_motorbench_msA.csv`): the same 240 lines 11..250 Hz, `G` within 1e-6
 //! relative and the variance within 10 %. The file's comments state `y2 = -theta_my`.
 
-use frf_data::io::read_frf_csv;
-use frf_data::matfile::MatFile;
-use frf_data::nonparametric::spectra_csv::{read_spectra_csv, write_spectra_csv};
-use frf_data::nonparametric::time_records::{
+use experiment::matfile::MatFile;
+use experiment::nonparametric::spectra_csv::{read_spectra_csv, write_spectra_csv};
+use experiment::nonparametric::time_records::{
     spectra_from_records, ExperimentRecords, RecordConfig,
 };
-use frf_data::nonparametric::{estimate, EstimatorConfig};
+use experiment::nonparametric::{estimate, EstimatorConfig};
+use frf_data::io::read_frf_csv;
 use frf_data::{Frf, FrfDataset};
 
 /// Largest relative error of `G` and of the variance, `sign2` applied to output 2.
