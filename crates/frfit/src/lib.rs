@@ -6,6 +6,7 @@
 //! re-exported here so that a user can depend on `frfit` alone.
 
 pub mod declared;
+pub mod diagnose;
 pub mod error;
 pub mod pipeline;
 pub mod plots;
