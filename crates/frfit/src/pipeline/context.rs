@@ -52,9 +52,17 @@ pub struct FitContext {
 }
 
 impl FitContext {
-    /// The setup of [`super::run`]: band, declarations, hold and delay, then the noise
-    /// level, CMIF, fit data and delay estimate; records the stages in `timings`.
-    pub(crate) fn new(
+    /// The setup of [`super::run`] on `data`: the band, the declarations, the hold and
+    /// the delay, then the noise level, CMIF, fit data and delay estimate of the band.
+    ///
+    /// Fails when the band is empty or outside the data, or when the noise level, the
+    /// CMIF or the fit data cannot be formed (non-finite values, all-zero weights).
+    pub fn new(data: &Frf, cfg: &PipelineConfig) -> Result<Self, FrfitError> {
+        Self::timed(data, cfg, &mut Timings::default())
+    }
+
+    /// [`new`](Self::new), recording the stages in `timings`.
+    pub(crate) fn timed(
         data: &Frf,
         cfg: &PipelineConfig,
         timings: &mut Timings,

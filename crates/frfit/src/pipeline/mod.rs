@@ -230,7 +230,7 @@ pub fn run(
 ) -> Result<PipelineOutput, FrfitError> {
     let t0 = Instant::now();
     let mut timings = Timings::default();
-    let ctx = FitContext::new(data, cfg, &mut timings)?;
+    let ctx = FitContext::timed(data, cfg, &mut timings)?;
     let t = Instant::now();
     let (fit, fitter_report) = first_fit(&ctx, cfg)?;
     timings.stage("fit", t);
