@@ -5,9 +5,9 @@
 //! `validation`); while it is significant, the round proposes the effects whose
 //! signatures the residual shows ([`Candidate`]: missed mode, delay, hold, feedthrough,
 //! stiffness, input or output dynamics), refits the model with each
-//! ([`trial`]: also the missed modes jointly, and a delay by a refit from the start),
+//! (module `trial`: also the missed modes jointly, and a delay by a refit from the start),
 //! and keeps the one that explains the most when an F test that accounts for the added
-//! parameters says it explains more than noise ([`accept`]), then prunes the modes the
+//! parameters says it explains more than noise (module `accept`), then prunes the modes the
 //! new structure made redundant. The loop stops when the residual is at the noise level
 //! or when no candidate helps; a final refinement converges the last structure, guarded
 //! against instability and against ending worse than the first fit. Every tested

@@ -99,7 +99,7 @@ pub struct PipelineConfig {
     /// Significance level of the tests. Default: 1e-3.
     pub alpha: f64,
     /// Practical-significance floor of an effect's F statistic (see
-    /// [`AdaptConfig::min_f`]). Default: 25.
+    /// [`additive_riv::structure::AdaptConfig::min_f`]). Default: 25.
     pub min_f: f64,
     /// A model to start from (from `--model MODEL.json`) instead of the CMIF
     /// initialisation.
