@@ -7,6 +7,7 @@
 
 pub mod chain;
 pub mod declared;
+pub mod diagnose;
 pub mod error;
 pub mod pipeline;
 pub mod plots;

@@ -801,11 +801,10 @@ fn mark_frequencies(
     if !(ymin.is_finite() && ymax > 0.0) {
         return false;
     }
-    for (key, f) in marks {
-        let (f, label) = if key.ends_with("fs_hz") {
-            (f / 2.0, format!("fs/2 = {} Hz", fmt_num(f / 2.0)))
-        } else {
-            (f, format!("{} Hz", fmt_num(f)))
+    for mark in marks {
+        let (f, label) = match mark {
+            HzMark::SampleRate(fs) => (fs / 2.0, format!("fs/2 = {} Hz", fmt_num(fs / 2.0))),
+            HzMark::Frequency(f) => (f, format!("{} Hz", fmt_num(f))),
         };
         if !(f.is_finite() && f >= lo && f <= hi && f > 0.0) {
             continue;
@@ -830,7 +829,17 @@ fn mark_frequencies(
     marked
 }
 
-fn collect_hz(v: &Value, key: &str, out: &mut Vec<(String, f64)>) {
+/// A frequency parameter of a step, as marked in its figure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum HzMark {
+    /// A frequency (`*_hz`), marked where it is.
+    Frequency(f64),
+    /// A sample rate (`*fs_hz`), marked at its Nyquist frequency.
+    SampleRate(f64),
+}
+
+/// The frequency parameters (`*_hz` keys, at any depth) of a step's `params`.
+fn collect_hz(v: &Value, key: &str, out: &mut Vec<HzMark>) {
     match v {
         Value::Object(map) => {
             for (k, x) in map {
@@ -844,7 +853,11 @@ fn collect_hz(v: &Value, key: &str, out: &mut Vec<(String, f64)>) {
         }
         Value::Number(x) if key.ends_with("_hz") => {
             if let Some(f) = x.as_f64() {
-                out.push((key.to_string(), f));
+                out.push(if key.ends_with("fs_hz") {
+                    HzMark::SampleRate(f)
+                } else {
+                    HzMark::Frequency(f)
+                });
             }
         }
         _ => {}

@@ -101,6 +101,8 @@ pub struct StepSummary {
     /// Why the effect was a candidate (what the residual showed), in words with numbers.
     pub evidence: String,
     /// Its estimated parameters (`f_hz`, `zeta`; `seconds`; `fs_hz`; `inputs`, `poles`...).
+    /// The pipeline writes them from [`crate::diagnose::FittedEffect`]; any JSON object
+    /// is shown by the report.
     pub params: serde_json::Value,
     /// Standard deviations of the parameters where available.
     pub uncertainty: Option<serde_json::Value>,

@@ -1,0 +1,365 @@
+//! The candidates of a diagnosis round: one variant per effect of the catalogue, with
+//! the parameters the refit starts from, proposed from the residual analysis.
+
+use additive_riv::structure::ResidualStats;
+use additive_riv::{augment, AdditiveModel, FactorTarget, FitData, RivError, SubmodelKind};
+use validation::residual::{Effect, ResidualAnalysis};
+
+/// Where a delay candidate's start comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DelayStart {
+    /// The phase slope of the residual (biased when the model is far off: modes fitted
+    /// without the delay absorb part of it).
+    ResidualSlope,
+    /// The data's own phase slope (the context's delay estimate) beyond the model's
+    /// delay and the exact hold's half sample.
+    DataSlope,
+}
+
+/// One effect of the catalogue to add to the model, with its starting parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Candidate {
+    /// A mode at a significant residual peak.
+    MissedMode {
+        /// Starting natural frequency, Hz.
+        f_hz: f64,
+        /// Starting relative damping (from the residual's CMIF, clamped to
+        /// `[0.002, 0.2]`).
+        zeta: f64,
+        /// The residual peak that called for it, Hz: the refit must remove most of the
+        /// residual around it.
+        peak_hz: f64,
+    },
+    /// A delay beyond the model's, fitted (refined in the iterations).
+    Delay {
+        /// Starting delay added to the model's, seconds.
+        seconds: f64,
+        /// Where the start comes from.
+        start: DelayStart,
+    },
+    /// The exact zero-order hold at the measurement's sample rate.
+    Hold {
+        /// Sample rate, Hz.
+        fs_hz: f64,
+    },
+    /// A constant feedthrough matrix.
+    Feedthrough {
+        /// RMS magnitude of the residual's constant part.
+        rms: f64,
+        /// Crosstalk that bypasses the delay and hold (else inside them, a biproper
+        /// plant).
+        bypasses_delay: bool,
+    },
+    /// A stiffness that suspends the rigid body.
+    Stiffness {
+        /// Suspension frequency, Hz.
+        f_hz: f64,
+        /// Its relative damping as the signature estimated it (the augmentation
+        /// clamps it to `[1e-3, 0.9]`).
+        zeta: f64,
+    },
+    /// A first-order dynamics factor on inputs (actuator dynamics).
+    InputDynamics {
+        /// The inputs, 1-based.
+        inputs: Vec<usize>,
+        /// Starting corner frequencies, Hz.
+        poles: Vec<f64>,
+    },
+    /// A first-order dynamics factor on outputs (sensor dynamics).
+    OutputDynamics {
+        /// The outputs, 1-based.
+        outputs: Vec<usize>,
+        /// Starting corner frequencies, Hz.
+        poles: Vec<f64>,
+    },
+}
+
+/// A candidate with the evidence that proposed it.
+#[derive(Debug, Clone)]
+pub struct Proposal {
+    /// What to add.
+    pub candidate: Candidate,
+    /// Why, in words with numbers.
+    pub evidence: String,
+}
+
+impl Candidate {
+    /// The catalogue effect.
+    pub fn effect(&self) -> Effect {
+        match self {
+            Candidate::MissedMode { .. } => Effect::MissedMode,
+            Candidate::Delay { .. } => Effect::Delay,
+            Candidate::Hold { .. } => Effect::Hold,
+            Candidate::Feedthrough { .. } => Effect::Feedthrough,
+            Candidate::Stiffness { .. } => Effect::Stiffness,
+            Candidate::InputDynamics { .. } => Effect::InputDynamics,
+            Candidate::OutputDynamics { .. } => Effect::OutputDynamics,
+        }
+    }
+
+    /// What identifies the candidate among the tested ones of its effect: the residual
+    /// peak to 0.1 Hz, the 0-based input or output, the data's delay start; empty for
+    /// the others (tested again whenever proposed).
+    pub fn key(&self) -> String {
+        match self {
+            Candidate::MissedMode { peak_hz, .. } => mode_key(*peak_hz),
+            Candidate::InputDynamics { inputs: v, .. }
+            | Candidate::OutputDynamics { outputs: v, .. } => v
+                .first()
+                .map(|i| format!("{}", i.saturating_sub(1)))
+                .unwrap_or_default(),
+            Candidate::Delay {
+                start: DelayStart::DataSlope,
+                ..
+            } => "data".into(),
+            _ => String::new(),
+        }
+    }
+
+    /// `model` with the effect added at its starting parameters (numerators zero where
+    /// the structure changed: refit them).
+    pub fn augment(&self, model: &AdditiveModel) -> Result<AdditiveModel, RivError> {
+        match self {
+            Candidate::MissedMode { f_hz, zeta, .. } => augment::with_mode(model, *f_hz, *zeta),
+            Candidate::Delay { seconds, .. } => augment::with_fitted_delay(model, *seconds),
+            Candidate::Hold { fs_hz } => augment::to_exact_hold(model, *fs_hz),
+            Candidate::Feedthrough {
+                bypasses_delay: true,
+                ..
+            } => augment::with_crosstalk(model),
+            Candidate::Feedthrough { .. } => augment::with_feedthrough(model),
+            Candidate::Stiffness { f_hz, zeta } => {
+                augment::with_stiffness(model, *f_hz, zeta.clamp(1e-3, 0.9))
+            }
+            Candidate::InputDynamics { inputs, poles } => {
+                dynamics(model, FactorTarget::Input, inputs, poles)
+            }
+            Candidate::OutputDynamics { outputs, poles } => {
+                dynamics(model, FactorTarget::Output, outputs, poles)
+            }
+        }
+    }
+}
+
+/// A first-order factor on the first of `which` (1-based) at the first of `poles`.
+fn dynamics(
+    model: &AdditiveModel,
+    target: fn(usize) -> FactorTarget,
+    which: &[usize],
+    poles: &[f64],
+) -> Result<AdditiveModel, RivError> {
+    let (Some(index), Some(&pole)) = (which.first().and_then(|i| i.checked_sub(1)), poles.first())
+    else {
+        return Err(RivError::Structure(
+            "a dynamics candidate needs an input or output (1-based) and a pole".into(),
+        ));
+    };
+    augment::with_dynamics(model, target(index), 1, pole)
+}
+
+/// The key of a missed mode at `f_hz` (its frequency to 0.1 Hz).
+fn mode_key(f_hz: f64) -> String {
+    format!("{:.0}", f_hz * 10.0)
+}
+
+/// A signature worth a refit: significant at `alpha` and explaining at least 2 % of
+/// the residual's excess energy (a refit costs about a second on the wafer stage; the
+/// F test after it decides).
+fn plausible(fit: &validation::signatures::TemplateFit, alpha: f64) -> bool {
+    fit.p_value < alpha && fit.explained_fraction >= 0.02
+}
+
+/// The evidence line of `effect` in the analysis.
+fn detail(an: &ResidualAnalysis, effect: Effect) -> String {
+    an.evidence
+        .iter()
+        .find(|e| e.effect == effect)
+        .map(|e| e.detail.clone())
+        .unwrap_or_default()
+}
+
+/// Candidate augmentations of `model` from the residual: every effect of the catalogue
+/// whose signature test is significant at `alpha` (the refit and its F test decide, so
+/// the signature need not explain most of the residual), the hold whenever the sample
+/// rate is known and the hold is not modelled, and the two strongest residual peaks as
+/// missed modes. `data_delay_s` is the data's own total delay (a second start for the
+/// delay); what `tested` holds is not proposed again.
+pub fn propose(
+    model: &AdditiveModel,
+    an: &ResidualAnalysis,
+    stats: &ResidualStats,
+    fd: &FitData,
+    fs_hz: Option<f64>,
+    alpha: f64,
+    tested: &[(Effect, String)],
+    data_delay_s: Option<f64>,
+) -> Vec<Proposal> {
+    let mut out: Vec<Proposal> = Vec::new();
+    let mut push = |candidate: Candidate, evidence: String| {
+        out.push(Proposal {
+            candidate,
+            evidence,
+        })
+    };
+    let seen = |e: Effect, key: &str| tested.iter().any(|(x, k)| *x == e && k == key);
+    // missed mode: the two strongest residual peaks (local and Bonferroni tests)
+    let peaks = additive_riv::structure::residual_peaks(stats, fd, alpha, 0.025);
+    for &(f, ratio) in peaks.iter().take(2) {
+        if !seen(Effect::MissedMode, &mode_key(f)) {
+            let zeta = an
+                .residual_cmif
+                .iter()
+                .filter(|p| (p.f_hz - f).abs() < 0.01 * f)
+                .find_map(|p| p.damping)
+                .unwrap_or(0.01)
+                .clamp(0.002, 0.2);
+            let ev = format!(
+                "residual peak at {f:.2} Hz, {ratio:.1} x its local threshold; {}",
+                detail(an, Effect::MissedMode)
+            );
+            push(
+                Candidate::MissedMode {
+                    f_hz: f,
+                    zeta,
+                    peak_hz: f,
+                },
+                ev,
+            );
+        }
+    }
+    if !model.factor.fit_delay && plausible(&an.phase_trend.fit, alpha) {
+        push(
+            Candidate::Delay {
+                seconds: an.phase_trend.delay_s,
+                start: DelayStart::ResidualSlope,
+            },
+            detail(an, Effect::Delay),
+        );
+    }
+    // The residual's phase slope is biased when the model is far off (modes fitted
+    // without the delay absorb part of it); the data's own phase slope, from the delay
+    // estimator of frf-data, is a second start for the same effect.
+    if let Some(total) = data_delay_s {
+        let hold_half = match model.domain() {
+            additive_riv::Domain::ZohDiscrete { ts } => 0.5 * ts,
+            additive_riv::Domain::Continuous => 0.0,
+        };
+        let d = total - hold_half - model.factor.delay_s;
+        let d_trend = an.phase_trend.delay_s;
+        if !model.factor.fit_delay
+            && an.significant
+            && d.abs() > 1e-6
+            && (d - d_trend).abs() > 1e-6
+            && !seen(Effect::Delay, "data")
+        {
+            push(
+                Candidate::Delay {
+                    seconds: d,
+                    start: DelayStart::DataSlope,
+                },
+                format!(
+                    "phase slope of the data: {:.2} us in all, {:.2} us beyond the model's delay (the residual's slope says {:.2} us)",
+                    total * 1e6,
+                    d * 1e6,
+                    d_trend * 1e6
+                ),
+            );
+        }
+    }
+    if let (Some(fs), additive_riv::Domain::Continuous) = (fs_hz, model.domain()) {
+        if model.factor.derivative_order == 0 {
+            let ev = match &an.hold {
+                Some(h) => format!(
+                    "sample rate {fs} Hz known; droop template amplitude {:.2} (1 = a hold at {fs} Hz), correlation {:.2}, {:.0}% of the excess",
+                    h.amplitude,
+                    h.correlation,
+                    100.0 * h.fit.explained_fraction
+                ),
+                None => format!("sample rate {fs} Hz known"),
+            };
+            push(Candidate::Hold { fs_hz: fs }, ev);
+        }
+    }
+    if !model
+        .submodels
+        .iter()
+        .any(|s| s.kind == SubmodelKind::Feedthrough)
+        && plausible(&an.feedthrough.fit, alpha)
+    {
+        // inside the delay and hold (a biproper plant) or bypassing them (crosstalk)
+        for bypass in [false, true] {
+            push(
+                Candidate::Feedthrough {
+                    rms: an.feedthrough.rms_magnitude,
+                    bypasses_delay: bypass,
+                },
+                format!(
+                    "{}; tested {}",
+                    detail(an, Effect::Feedthrough),
+                    if bypass {
+                        "as crosstalk that bypasses the delay and hold"
+                    } else {
+                        "inside the delay and hold"
+                    }
+                ),
+            );
+        }
+    }
+    // a suspended body seen from above its suspension frequency looks like 1/s^2 or,
+    // with its damping, like 1/s to the first fit: either rigid body can be suspended
+    let has_free_rb = model
+        .submodels
+        .iter()
+        .any(|s| s.kind == SubmodelKind::RigidBody && s.integrators >= 1);
+    if has_free_rb && plausible(&an.stiffness.fit, alpha) {
+        let s = &an.stiffness;
+        let f = if s.f_hz.is_finite() && s.f_hz > 0.0 {
+            s.f_hz
+        } else {
+            s.equivalent_f_hz
+        };
+        if f.is_finite() && f > 0.0 {
+            push(
+                Candidate::Stiffness {
+                    f_hz: f,
+                    zeta: s.zeta,
+                },
+                detail(an, Effect::Stiffness),
+            );
+        }
+    }
+    for (effect, list, input) in [
+        (Effect::InputDynamics, &an.input_dynamics, true),
+        (Effect::OutputDynamics, &an.output_dynamics, false),
+    ] {
+        // the strongest row or column whose first-order factor is significant
+        let best = list
+            .iter()
+            .filter(|f| plausible(&f.fit, alpha))
+            .max_by(|a, b| a.fit.explained.total_cmp(&b.fit.explained));
+        if let Some(f) = best {
+            if seen(effect, &format!("{}", f.index)) {
+                continue;
+            }
+            let pole = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
+                f.pole_hz
+            } else {
+                1e3
+            };
+            let (which, poles) = (vec![f.index + 1], vec![pole]);
+            let candidate = if input {
+                Candidate::InputDynamics {
+                    inputs: which,
+                    poles,
+                }
+            } else {
+                Candidate::OutputDynamics {
+                    outputs: which,
+                    poles,
+                }
+            };
+            push(candidate, detail(an, effect));
+        }
+    }
+    out
+}

@@ -1,0 +1,267 @@
+//! The trials of a diagnosis round: each candidate refitted and F-tested against the
+//! current model, the missed modes also jointly, and a delay also by a refit from the
+//! start.
+
+use super::candidate::Proposal;
+use super::fitted::{FittedEffect, Refit};
+use crate::pipeline::{err, FitContext, PipelineConfig};
+use crate::FrfitError;
+use additive_riv::riv::{iterate, RivConfig};
+use additive_riv::significance::{chi2_upper, f_statistic, noise_scale};
+use additive_riv::structure::{local_energy, AdaptConfig, ResidualStats};
+use additive_riv::{fit_numerators, AdditiveFitter, AdditiveModel, DelayChoice, FitData};
+use frf_data::ModelStructure;
+
+/// One tested candidate: the refitted model and its F test against the current model.
+#[derive(Debug, Clone)]
+pub struct Trial {
+    /// The parameters as fitted.
+    pub params: FittedEffect,
+    /// Why it was tested and what the refit showed.
+    pub evidence: String,
+    /// The refitted model.
+    pub model: AdditiveModel,
+    /// Its weighted cost `sum w |E|^2`.
+    pub cost: f64,
+    /// F statistic of the cost decrease per added parameter.
+    pub f: f64,
+    /// The critical value it must pass.
+    pub f_crit: f64,
+    /// Real parameters added.
+    pub added: usize,
+    /// For the joint missed-mode trial: (frequency, damping) of every mode it added,
+    /// each reported as its own `missed_mode` step.
+    pub joint_modes: Vec<(f64, f64)>,
+}
+
+impl Trial {
+    /// Whether it passes its F test.
+    pub fn passes(&self) -> bool {
+        self.f > self.f_crit
+    }
+}
+
+/// The weighted cost `sum w |E|^2` of `model` on `fd`.
+pub fn model_cost(model: &AdditiveModel, fd: &FitData) -> f64 {
+    let lay = additive_riv::problem::Layout::of(model);
+    let basis = additive_riv::problem::Basis::new(model, &lay, &fd.omega);
+    let (_, eta) = additive_riv::problem::pack(model, &lay);
+    let g = additive_riv::problem::groups(model, &lay);
+    additive_riv::problem::cost(fd, &lay, &basis, &eta, None, &g)
+}
+
+/// The modes of `after` that are not in `before`: each mode of `before` takes the
+/// nearest unclaimed mode of `after` within 3 %, the rest are new.
+pub fn new_modes(before: &AdditiveModel, after: &AdditiveModel) -> Vec<(f64, f64)> {
+    let mut left: Vec<(f64, f64)> = after.modes().iter().map(|m| (m.f_hz, m.zeta)).collect();
+    for old in before.modes() {
+        let nearest = left
+            .iter()
+            .enumerate()
+            .filter(|(_, (f, _))| (f / old.f_hz - 1.0).abs() < 0.03)
+            .min_by(|a, b| {
+                (a.1 .0 - old.f_hz)
+                    .abs()
+                    .total_cmp(&(b.1 .0 - old.f_hz).abs())
+            })
+            .map(|(i, _)| i);
+        if let Some(i) = nearest {
+            left.remove(i);
+        }
+    }
+    left
+}
+
+/// The F test of a refit `model` that adds `added` real parameters and lowers the
+/// weighted cost from `before` to `after`: the cost explained per added parameter over
+/// the noise scale of the larger model, and its critical value at `cfg.alpha` with the
+/// effective number of parameters (correlated residuals), floored at `cfg.min_f`.
+/// Returns the residual statistics of `model` as well (the local tests use them).
+pub fn f_test(
+    model: &AdditiveModel,
+    fd: &FitData,
+    before: f64,
+    after: f64,
+    added: usize,
+    cfg: &PipelineConfig,
+) -> (ResidualStats, f64, f64) {
+    let stats = ResidualStats::new(model, fd);
+    let s2 = noise_scale(after, fd, model.n_params());
+    let f = f_statistic(before - after, added, s2);
+    let p_eff = stats.effective_params(added, fd.m());
+    let f_crit = (chi2_upper(p_eff, cfg.alpha) / p_eff).max(cfg.min_f);
+    (stats, f, f_crit)
+}
+
+/// Refits a candidate: numerators (eq. 24), then Algorithm 1 to a coarse tolerance.
+fn refit(
+    model: AdditiveModel,
+    fd: &FitData,
+    riv: &RivConfig,
+) -> Result<(AdditiveModel, f64), FrfitError> {
+    let mut m = model;
+    fit_numerators(&mut m, fd).map_err(err("refit"))?;
+    let f = iterate(m, fd, riv).map_err(err("refit"))?;
+    // a refit whose iterations failed (singular, no descent) before any step was taken
+    // did not fit the effect: its model is the start, not an estimate
+    if let (frf_data::Convergence::Failed { reason }, true) =
+        (&f.convergence, f.cost_history.len() <= 1)
+    {
+        return Err(FrfitError::Fit {
+            what: "refit".into(),
+            why: reason.clone(),
+        });
+    }
+    let c = model_cost(&f.model, fd);
+    Ok((f.model, c))
+}
+
+/// What every trial of a round is tested against.
+pub struct Current<'a> {
+    /// The current model.
+    pub model: &'a AdditiveModel,
+    /// Its weighted cost.
+    pub cost: f64,
+    /// Its residual statistics.
+    pub stats: &'a ResidualStats,
+}
+
+/// Missed modes jointly: close pairs merged into one fitted mode, or several peaks at
+/// once, are resolved by adding a mode at every significant residual peak and refining,
+/// with the local and F tests of the structure adaptation per mode (what `frfit fit`
+/// does); tested as one candidate against the rest. `None` when it adds no mode or
+/// does not lower the cost.
+pub fn joint_missed_modes(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    riv: &RivConfig,
+    current: &Current,
+) -> Option<Trial> {
+    let fd = &ctx.fit_data;
+    let acfg = AdaptConfig {
+        min_f: cfg.min_f,
+        alpha: cfg.alpha,
+        // every added mode must still pass the local and F tests
+        peak_over_local: 5.0,
+        ..Default::default()
+    };
+    let (af, rep) = additive_riv::adapt_modes(current.model.clone(), fd, riv, &acfg).ok()?;
+    let m = af.model;
+    let c = model_cost(&m, fd);
+    let joint = new_modes(current.model, &m);
+    let added = m.n_params().saturating_sub(current.model.n_params());
+    let lowers_cost = c < current.cost;
+    if !(!joint.is_empty() && added > 0 && lowers_cost) {
+        return None;
+    }
+    let (_, f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
+    let list: Vec<String> = joint.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
+    let evidence = format!(
+        "significant residual peaks; modes added at every peak in {} round(s) of add/drop with the local test per mode (removed on the way: {}): {}",
+        rep.rounds,
+        rep.dropped.len(),
+        list.join(", ")
+    );
+    Some(Trial {
+        params: FittedEffect::MissedMode {
+            f_hz: joint[0].0,
+            zeta: joint[0].1,
+        },
+        evidence,
+        model: m,
+        cost: c,
+        f,
+        f_crit,
+        added,
+        joint_modes: joint,
+    })
+}
+
+/// A delay large enough to matter also misplaces the modes fitted without it: the fit
+/// from the start (CMIF, delay estimated from the data's phase slope and refined, mode
+/// adaptation), tested beside the incremental refit. `None` when it fails, does not
+/// lower the cost or ends without a fitted delay.
+pub fn restart_with_delay(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    current: &Current,
+) -> Option<Trial> {
+    let fd = &ctx.fit_data;
+    let fc = additive_riv::FitterConfig {
+        delay: DelayChoice::Auto,
+        ..ctx.quiet_fitter_config(cfg)
+    };
+    let (fit, rep) = AdditiveFitter::new(fc).fit(&ctx.band).ok()?;
+    let m = fit.model;
+    let c = model_cost(&m, fd);
+    let lowers_cost = c < current.cost;
+    if !(lowers_cost && m.factor.fit_delay) {
+        return None;
+    }
+    let added = m.n_params().saturating_sub(current.model.n_params()).max(1);
+    let (_, f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
+    let evidence = format!(
+        "the residual's phase slope; refitted from the start with the delay estimated from the data ({:.2} us) and refined to {:.2} us, {} modes",
+        rep.delay_estimate.as_ref().map_or(f64::NAN, |d| d.tau_s * 1e6),
+        m.factor.delay_s * 1e6,
+        m.modes().len()
+    );
+    Some(Trial {
+        params: FittedEffect::delay(current.model, &m, Some(Refit::FromTheStart)),
+        evidence,
+        model: m,
+        cost: c,
+        f,
+        f_crit,
+        added,
+        joint_modes: Vec::new(),
+    })
+}
+
+/// The candidate of `proposal` added to the current model, refitted and F-tested;
+/// `None` when the augmentation or the refit fails. A missed mode must also remove
+/// most (75 %) of the residual within 1 % of its peak, or its F statistic is held
+/// below the critical value.
+pub fn refit_candidate(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    riv: &RivConfig,
+    current: &Current,
+    proposal: Proposal,
+) -> Option<Trial> {
+    let fd = &ctx.fit_data;
+    let Proposal {
+        candidate,
+        mut evidence,
+    } = proposal;
+    let aug = candidate.augment(current.model).ok()?;
+    let added = aug
+        .n_params()
+        .saturating_sub(current.model.n_params())
+        .max(1);
+    let (m, c) = refit(aug, fd, riv).ok()?;
+    let (stats, mut f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
+    if let super::Candidate::MissedMode { peak_hz: fp, .. } = candidate {
+        let half = 0.01 * fp;
+        let ratio = local_energy(&stats, fd, fp, half)
+            / local_energy(current.stats, fd, fp, half).max(f64::MIN_POSITIVE);
+        evidence = format!(
+            "{evidence}; after the refit {:.0}% of the residual within 1% of the peak remains",
+            100.0 * ratio
+        );
+        if ratio > 0.25 {
+            f = f.min(f_crit * (1.0 - 1e-12));
+        }
+    }
+    let params = FittedEffect::of_refit(&candidate, current.model, &m);
+    Some(Trial {
+        params,
+        evidence,
+        model: m,
+        cost: c,
+        f,
+        f_crit,
+        added,
+        joint_modes: Vec::new(),
+    })
+}

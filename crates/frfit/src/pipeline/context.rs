@@ -1,0 +1,223 @@
+//! The setup of a run: the band, what the file and the command line declare (hold,
+//! delay, sample rate), and what every later stage works from, computed once: the noise
+//! level, the CMIF, the weighted fit data, the data's own delay estimate and the
+//! angular frequencies.
+
+use super::{err, FrfType, PipelineConfig, Timings};
+use crate::declared::{declared, Declared};
+use crate::FrfitError;
+use additive_riv::riv::RivConfig;
+use additive_riv::structure::AdaptConfig;
+use additive_riv::{AdditiveModel, DelayChoice, FitData, FitterConfig, Hold, ModeSelection};
+use frf_data::cmif::{cmif, Cmif};
+use frf_data::delay::{estimate_delay, DelayEstimate};
+use frf_data::{Frf, FrfDataset, ProgressSink, Weighting};
+use std::time::Instant;
+use validation::noise::{noise_level, NoiseLevel};
+use validation::residual::ResidualConfig;
+
+/// Everything a run works from, computed once by [`FitContext::new`] and shared by the
+/// first fit, the diagnosis loop and the summary.
+#[derive(Debug, Clone)]
+pub struct FitContext {
+    /// The fitted band (a copy of the data's lines in the band, never the 0 Hz line).
+    pub band: Frf,
+    /// What the file declares (sample rate, delay, hold, realizations).
+    pub declared: Declared,
+    /// The declared (known) effects in words, from the file and the command line.
+    pub declared_list: Vec<String>,
+    /// Sample rate of the measurement, Hz: the command line's, else the file's.
+    pub fs_hz: Option<f64>,
+    /// The hold modelled from the start (command line, or a zero-order hold the file
+    /// declares with its sample rate); `None` when there is none.
+    pub hold: Option<Hold>,
+    /// How the first fit treats the delay (see [`PipelineConfig::delay`]).
+    pub delay: DelayChoice,
+    /// The noise level of the band.
+    pub noise: NoiseLevel,
+    /// CMIF of the band.
+    pub cmif: Cmif,
+    /// The weighting, resolved for the band.
+    pub weighting: Weighting,
+    /// The band with its weights in the estimator's layout.
+    pub fit_data: FitData,
+    /// The data's own delay (phase slope of the FRF, default settings of
+    /// [`estimate_delay`]); `None` when the estimator fails on these data.
+    pub delay_estimate: Option<DelayEstimate>,
+    /// Angular frequencies of the band's lines, rad/s.
+    pub omega: Vec<f64>,
+    /// Real degrees of freedom of the variance, `2 (R - 1)` when it was estimated from
+    /// `R >= 3` declared realizations.
+    pub variance_dof: Option<f64>,
+}
+
+impl FitContext {
+    /// The setup of [`super::run`] on `data`: the band, the declarations, the hold and
+    /// the delay, then the noise level, CMIF, fit data and delay estimate of the band.
+    ///
+    /// Fails when the band is empty or outside the data, or when the noise level, the
+    /// CMIF or the fit data cannot be formed (non-finite values, all-zero weights).
+    pub fn new(data: &Frf, cfg: &PipelineConfig) -> Result<Self, FrfitError> {
+        Self::timed(data, cfg, &mut Timings::default())
+    }
+
+    /// [`new`](Self::new), recording the stages in `timings`.
+    pub(crate) fn timed(
+        data: &Frf,
+        cfg: &PipelineConfig,
+        timings: &mut Timings,
+    ) -> Result<Self, FrfitError> {
+        // band (never the 0 Hz line)
+        let t = Instant::now();
+        let (lo, hi) = match cfg.band_hz {
+            Some(b) => b,
+            None => {
+                let f = data.freq_hz_slice();
+                (
+                    f.iter().copied().find(|&x| x > 0.0).unwrap_or(f[0]),
+                    f[f.len() - 1],
+                )
+            }
+        };
+        let lo = if lo <= 0.0 { f64::MIN_POSITIVE } else { lo };
+        let band = data.band(lo, hi)?.to_frf();
+        let decl: Declared = declared(data);
+        let fs_hz = cfg.fs_hz.or(decl.fs_hz);
+        let noise = noise_level(&band).map_err(err("noise level"))?;
+        let weighting = cfg.weighting.resolve(&band);
+        let fit_data = FitData::new(&band, &weighting).map_err(err("fit"))?;
+        let omega = band.omegas();
+        timings.stage("load+band", t);
+        let t = Instant::now();
+        let cmif = cmif(&band)?;
+        timings.stage("cmif", t);
+        let mut declared_list = decl.sources.clone();
+        if let Some(h) = cfg.hold {
+            declared_list.push(format!("hold {h:?} (command line)"));
+        }
+        // a hold the file declares (with its sample rate) is modelled from the start, like
+        // one given with --hold; it is not a discovery of the loop
+        let hold = cfg.hold.or_else(|| match (decl.zoh, fs_hz) {
+            (true, Some(fs))
+                if cfg.frf_type == FrfType::Displacement
+                    && fs / 2.0 > hi.min(data.freq_hz_slice()[data.n_lines() - 1]) =>
+            {
+                Some(Hold::Zoh { fs_hz: fs })
+            }
+            _ => None,
+        });
+        let delay = match cfg.delay {
+            Some(d) => d,
+            None if cfg.diagnose => match decl.delay_s {
+                Some(s) => DelayChoice::Fixed { seconds: s },
+                None => DelayChoice::None,
+            },
+            None => DelayChoice::Auto,
+        };
+        let delay = match (delay, hold) {
+            // a declared total delay includes the hold's half sample, which the exact hold
+            // models itself
+            (DelayChoice::Fixed { seconds }, Some(Hold::Zoh { fs_hz })) if cfg.delay.is_none() => {
+                DelayChoice::Fixed {
+                    seconds: seconds - 0.5 / fs_hz,
+                }
+            }
+            (d, _) => d,
+        };
+        // a variance estimated from R realizations has 2 (R - 1) real degrees of freedom
+        let variance_dof = match (band.has_variance(), decl.realizations) {
+            (true, Some(r)) if r >= 3 => Some(2.0 * (r as f64 - 1.0)),
+            _ => None,
+        };
+        let t = Instant::now();
+        let delay_estimate = estimate_delay(&band, &Default::default()).ok();
+        timings.stage("delay estimate", t);
+        Ok(Self {
+            band,
+            declared: decl,
+            declared_list,
+            fs_hz,
+            hold,
+            delay,
+            noise,
+            cmif,
+            weighting,
+            fit_data,
+            delay_estimate,
+            omega,
+            variance_dof,
+        })
+    }
+
+    /// The data's total delay (hold + computation + transport), seconds, when estimated.
+    pub fn data_delay_s(&self) -> Option<f64> {
+        self.delay_estimate.as_ref().map(|d| d.tau_s)
+    }
+
+    /// The residual-analysis settings for `model`: the sample rate (for the hold's
+    /// droop template) only while the model does not hold the exact hold itself.
+    pub fn residual_config(&self, model: &AdditiveModel) -> ResidualConfig {
+        ResidualConfig {
+            sample_rate_hz: if model.domain() == additive_riv::Domain::Continuous {
+                self.fs_hz
+            } else {
+                None
+            },
+            variance_dof: self.variance_dof,
+            ..Default::default()
+        }
+    }
+
+    /// Algorithm 1 settings of `cfg` (method, weighting, progress), default tolerances.
+    pub fn riv_config(&self, cfg: &PipelineConfig) -> RivConfig {
+        RivConfig {
+            method: cfg.method,
+            weighting: cfg.weighting.clone(),
+            progress: cfg.progress.clone(),
+            ..Default::default()
+        }
+    }
+
+    /// The settings of the CMIF-initialised fit of the band: modes, the resolved hold
+    /// and delay, the FRF type, Algorithm 1, and the structure adaptation of the first
+    /// fit.
+    pub fn fitter_config(&self, cfg: &PipelineConfig) -> FitterConfig {
+        FitterConfig {
+            modes: cfg.modes.clone(),
+            hold: self.hold.unwrap_or(Hold::None),
+            delay: self.delay,
+            derivative_order: cfg.frf_type.derivative_order(),
+            riv: self.riv_config(cfg),
+            adapt: Some(AdaptConfig {
+                min_f: cfg.min_f,
+                alpha: cfg.alpha,
+                // The first fit completes the modes at significant residual peaks, as
+                // `frfit fit` does, unless the user declared the modes to expect
+                // (`--modes N` or frequencies): then a mode beyond them is a discovery of
+                // the diagnosis loop, reported as a step.
+                max_new_per_round: if cfg.diagnose && cfg.modes != ModeSelection::Auto {
+                    0
+                } else {
+                    6
+                },
+                ..Default::default()
+            }),
+            progress: cfg.progress.clone(),
+            ..Default::default()
+        }
+    }
+
+    /// [`fitter_config`](Self::fitter_config) without progress output (for fits that
+    /// the diagnosis loop runs as trials).
+    pub fn quiet_fitter_config(&self, cfg: &PipelineConfig) -> FitterConfig {
+        let fc = self.fitter_config(cfg);
+        FitterConfig {
+            progress: ProgressSink::none(),
+            riv: RivConfig {
+                progress: ProgressSink::none(),
+                ..fc.riv.clone()
+            },
+            ..fc
+        }
+    }
+}

@@ -1,0 +1,117 @@
+//! The first fit of a run: the model the diagnosis loop starts from (and, for
+//! `frfit fit`, the result).
+
+use super::{err, FitContext, PipelineConfig};
+use crate::FrfitError;
+use additive_riv::riv::iterate;
+use crate::chain::{run_chain, AdditiveOptions};
+use additive_riv::{fit_numerators, AdditiveModel, CmifInitReport, FitterReport, RivReport};
+use frf_data::{ChainSettings, Fit, LinkReport};
+
+/// The first fit of a run and where it came from.
+pub struct FirstFit {
+    /// The additive model the diagnosis continues from.
+    pub fit: Fit<AdditiveModel>,
+    /// What the fitter found on the way (CMIF peaks, delay estimate, rigid body).
+    pub report: FitterReport,
+    /// The chain's link names (`["cmif", "riv"]`); empty for a given start model.
+    pub chain: Vec<String>,
+    /// Each link's report.
+    pub links: Vec<LinkReport>,
+}
+
+/// Fits the band of `ctx` with the settings of `cfg`.
+///
+/// Without [`PipelineConfig::start_model`]: the estimator chain `cfg.init -> cfg.refine`
+/// ([`crate::chain::run_chain`]; by default the CMIF initialisation with the convex
+/// numerator fit, then the refined IV iterations of Algorithm 1 of the wafer-stage paper
+/// with the structure adaptation), with the hold and delay resolved in `ctx`
+/// ([`FitContext::fitter_config`]). The diagnosis continues in the chain's own additive
+/// structure when its last link has one, otherwise in the structure of the currency
+/// model with numerators by eq. (24). With a start model: its numerators refitted
+/// (eq. 24) on `ctx.fit_data`, then Algorithm 1 from it; the report is then empty.
+pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, FrfitError> {
+    if let Some(m) = &cfg.start_model {
+        let mut m = m.clone();
+        fit_numerators(&mut m, &ctx.fit_data).map_err(err("fit"))?;
+        let f = iterate(m, &ctx.fit_data, &ctx.riv_config(cfg)).map_err(err("fit"))?;
+        return Ok(FirstFit {
+            fit: f,
+            report: FitterReport::default(),
+            chain: Vec::new(),
+            links: Vec::new(),
+        });
+    }
+    let fc = ctx.fitter_config(cfg);
+    let settings = ChainSettings {
+        hold: fc.hold,
+        delay: fc.delay,
+        derivative_order: fc.derivative_order,
+        weighting: fc.riv.weighting.clone(),
+        modes: fc.modes.clone(),
+        peaks: fc.peaks.clone(),
+        order: None,
+        progress: fc.progress.clone(),
+    };
+    let opts = AdditiveOptions {
+        riv: fc.riv.clone(),
+        adapt: fc.adapt.clone(),
+        rigid_body: fc.rigid_body,
+    };
+    let result = run_chain(&ctx.band, &cfg.init, &cfg.refine, &settings, &opts)?;
+    let model = match result.model.native::<AdditiveModel>() {
+        Some(m) => m.clone(),
+        None => {
+            let (mut m, _) =
+                AdditiveModel::from_frf_model(&result.model.model, ctx.fit_data.band_hz, 0.01)
+                    .map_err(err("fit"))?;
+            fit_numerators(&mut m, &ctx.fit_data).map_err(err("fit"))?;
+            m
+        }
+    };
+    let mut report = FitterReport::default();
+    for l in &result.links {
+        if let Ok(r) = serde_json::from_value::<CmifInitReport>(l.details.clone()) {
+            report.cmif_peaks = r.cmif_peaks;
+            report.delay_estimate = r.delay_estimate;
+            report.integrators = r.integrators;
+            report.weighting = r.weighting;
+            report.init_cost = r.init_cost;
+            report.band_hz = r.band_hz;
+        } else if let Ok(r) = serde_json::from_value::<RivReport>(l.details.clone()) {
+            report.weighting = r.weighting;
+            report.adapt = r.adapt;
+        }
+    }
+    let last = result.links.last().cloned().ok_or_else(|| FrfitError::Fit {
+        what: "chain".into(),
+        why: "no link ran".into(),
+    })?;
+    let mut messages: Vec<String> = result
+        .links
+        .iter()
+        .flat_map(|l| l.messages.clone())
+        .collect();
+    messages.extend(result.notes.iter().cloned());
+    let fit = Fit {
+        model,
+        report: (),
+        cost_history: last.cost_history.clone(),
+        iterations: result.links.iter().map(|l| l.iterations).sum(),
+        convergence: last.convergence.clone(),
+        timings: result.links.iter().flat_map(|l| l.timings.clone()).collect(),
+        estimator: result
+            .links
+            .iter()
+            .map(|l| format!("{}: {}", l.link, l.estimator))
+            .collect::<Vec<_>>()
+            .join(" -> "),
+        messages,
+    };
+    Ok(FirstFit {
+        fit,
+        report,
+        chain: result.chain,
+        links: result.links,
+    })
+}

@@ -1,0 +1,315 @@
+//! The frfit pipeline: load -> band -> delay -> CMIF -> initialisation -> refinement ->
+//! residual analysis -> diagnosis loop -> report (DESIGN.md).
+//!
+//! [`run`] sets up a [`FitContext`] (band, declarations, and what every stage works
+//! from, computed once), fits the additive model of the wafer-stage paper (crate
+//! `additive-riv`) with [`first_fit`] and, with [`PipelineConfig::diagnose`], runs the
+//! diagnosis loop of [`crate::diagnose`] from it: it compares the residual with the
+//! measured noise level (crate `validation`), traces a significant residual to the
+//! effects of the catalogue (missed mode, delay, hold, feedthrough, stiffness, input or
+//! output dynamics), adds the effect with the strongest evidence to the model
+//! structure, refits, and keeps it only when an F test that accounts for the added
+//! parameters says it explains more than noise. It stops when the residual is at the
+//! noise level (`noise_limited`) or when no candidate helps (`unexplained_residual`),
+//! and records every step for the report.
+
+mod context;
+mod first_fit;
+mod summarize;
+
+pub use context::FitContext;
+pub use first_fit::{first_fit, FirstFit};
+pub(crate) use summarize::error_stats;
+pub use summarize::final_model_summary;
+
+use crate::diagnose::{diagnose, Diagnosis};
+use crate::summary::{StageTime, Summary};
+use crate::FrfitError;
+use additive_riv::{AdditiveModel, DelayChoice, FitterReport, Hold, IvMethod, ModeSelection};
+use frf_data::cmif::{Cmif, CmifPeak};
+use frf_data::{Fit, Frf, ModelStructure, ProgressSink, Weighting};
+use realize::ResponseGrid;
+use std::time::Instant;
+use summarize::{build_summary, RunRecord};
+use validation::noise::NoiseLevel;
+use validation::residual::analyze_residual;
+
+/// What the FRF measures: the model is always of the displacement, multiplied by
+/// `(j w)^k` for velocity (`k = 1`) or accelerance (`k = 2`) data, so that a free rigid
+/// body stays `1/s^2` (and becomes a constant in an accelerance).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FrfType {
+    /// Displacement (or angle) per force (or current). The default.
+    #[default]
+    Displacement,
+    /// Velocity per force.
+    Velocity,
+    /// Acceleration per force (accelerance).
+    Accelerance,
+}
+
+impl FrfType {
+    /// `k` of `(j w)^k`.
+    pub fn derivative_order(self) -> u32 {
+        match self {
+            FrfType::Displacement => 0,
+            FrfType::Velocity => 1,
+            FrfType::Accelerance => 2,
+        }
+    }
+    /// Name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            FrfType::Displacement => "displacement",
+            FrfType::Velocity => "velocity",
+            FrfType::Accelerance => "accelerance",
+        }
+    }
+}
+
+/// Settings of [`run`], with documented defaults.
+#[derive(Debug, Clone)]
+pub struct PipelineConfig {
+    /// Band to fit, Hz. Default: the whole data above 0 Hz.
+    pub band_hz: Option<(f64, f64)>,
+    /// Modes to start from. Default: every CMIF peak.
+    pub modes: ModeSelection,
+    /// A hold the user declares (`zoh:FS` or `sinc:FS`): modelled from the start, not a
+    /// discovery; `Some(Hold::None)` says there is none (overriding a hold the file's
+    /// comments declare). Default: `None`, take what the file declares.
+    pub hold: Option<Hold>,
+    /// Delay handling. `None` (the default) means: for `fit`, estimate it and refine it
+    /// in the iterations; for `diagnose`, take the delay the file declares (0 when it
+    /// declares none) and let the loop test for more.
+    pub delay: Option<DelayChoice>,
+    /// Sample rate of the measurement for testing a hold, Hz. Default: from the file's
+    /// metadata or comments.
+    pub fs_hz: Option<f64>,
+    /// What the FRF measures. Default: displacement.
+    pub frf_type: FrfType,
+    /// Instrument or SK. Default: RIV.
+    pub method: IvMethod,
+    /// Weighting. Default: inverse variance when the data carry it, eq. (27) otherwise.
+    pub weighting: Weighting,
+    /// Run the diagnosis loop. Default: false (`frfit fit`).
+    pub diagnose: bool,
+    /// At most this many effects are added by the loop (each round tests every
+    /// candidate, then adds the best). Default: 8.
+    pub max_steps: usize,
+    /// Significance level of the tests. Default: 1e-3.
+    pub alpha: f64,
+    /// Practical-significance floor of an effect's F statistic (see
+    /// [`additive_riv::structure::AdaptConfig::min_f`]). Default: 25.
+    pub min_f: f64,
+    /// A model to start from (from `--model MODEL.json`) instead of the CMIF
+    /// initialisation.
+    pub start_model: Option<AdditiveModel>,
+    /// The initialiser of the chain (see [`crate::chain::INITIALIZERS`]). Default: `cmif`.
+    pub init: String,
+    /// The refiner of the chain (see [`crate::chain::REFINERS`]). Default: `riv`.
+    pub refine: String,
+    /// Progress callback.
+    pub progress: ProgressSink,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self {
+            band_hz: None,
+            modes: ModeSelection::Auto,
+            hold: None,
+            delay: None,
+            fs_hz: None,
+            frf_type: FrfType::Displacement,
+            method: IvMethod::Riv,
+            weighting: Weighting::Auto,
+            diagnose: false,
+            max_steps: 8,
+            alpha: 1e-3,
+            min_f: 25.0,
+            start_model: None,
+            init: "cmif".into(),
+            refine: "riv".into(),
+            progress: ProgressSink::none(),
+        }
+    }
+}
+
+/// Everything a run produced: the band, the fit, the noise level, the CMIF, the model
+/// responses for the report, and the summary.
+pub struct PipelineOutput {
+    /// The fitted band (a copy of the data's lines in the band).
+    pub band: Frf,
+    /// The final fit.
+    pub fit: Fit<AdditiveModel>,
+    /// What the fitter found on the way.
+    pub fitter_report: FitterReport,
+    /// The links of the chain that made the first model (empty when the run started from
+    /// a given model).
+    pub chain: Vec<String>,
+    /// Each link's report.
+    pub links: Vec<frf_data::LinkReport>,
+    /// The noise level used.
+    pub noise: NoiseLevel,
+    /// CMIF of the band.
+    pub cmif: Cmif,
+    /// The picked peaks the fit started from.
+    pub peaks: Vec<CmifPeak>,
+    /// Response of the model before the diagnosis loop.
+    pub initial_response: ResponseGrid,
+    /// Response of the final model.
+    pub final_response: ResponseGrid,
+    /// Per step, the model response before and after.
+    pub step_responses: Vec<(ResponseGrid, ResponseGrid)>,
+    /// The summary (also written as `summary.json`).
+    pub summary: Summary,
+}
+
+pub(crate) fn err<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> FrfitError + '_ {
+    move |e| FrfitError::Fit {
+        what: what.to_string(),
+        why: e.to_string(),
+    }
+}
+
+impl PipelineOutput {
+    /// The model file of the final fit (modal form, submodels and provenance), as
+    /// `frfit fit/diagnose` and `cargo xtask wafer-stage` write it; `producer` names
+    /// what ran (e.g. `frfit diagnose`).
+    pub fn model_file(
+        &self,
+        data_path: &std::path::Path,
+        producer: &str,
+    ) -> Result<additive_riv::ModelFile, additive_riv::RivError> {
+        let provenance = additive_riv::Provenance {
+            estimator: self.fit.estimator.clone(),
+            data: Some(data_path.display().to_string()),
+            weighting: self.fitter_report.weighting.clone(),
+            iterations: self.fit.iterations,
+            convergence: self.fit.convergence.describe(),
+            cost: self.fit.final_cost(),
+            frfit_version: format!("{} ({producer})", env!("CARGO_PKG_VERSION")),
+            notes: self.fit.messages.clone(),
+            chain: self.chain.clone(),
+            links: self.links.clone(),
+        };
+        let band = self.summary.data.band_hz;
+        additive_riv::ModelFile::from_model(
+            &self.fit.model,
+            self.band.units.clone(),
+            Some((band[0], band[1])),
+            provenance,
+        )
+    }
+
+    /// What [`crate::report::write_report`] needs from this run, under `title`.
+    pub fn report_input<'a>(&'a self, title: &'a str) -> crate::report::ReportInput<'a> {
+        crate::report::ReportInput {
+            data: &self.band,
+            noise_var: Some(&self.noise.variance),
+            cmif: &self.cmif,
+            peaks: &self.peaks,
+            initial: &self.initial_response,
+            final_model: &self.final_response,
+            steps: &self.step_responses,
+            title,
+        }
+    }
+}
+
+/// Wall-clock time per stage of a run.
+#[derive(Debug, Default)]
+pub(crate) struct Timings(Vec<StageTime>);
+
+impl Timings {
+    /// Records stage `name`, started at `t`.
+    pub(crate) fn stage(&mut self, name: &str, t: Instant) {
+        self.0.push(StageTime {
+            stage: name.to_string(),
+            seconds: t.elapsed().as_secs_f64(),
+        });
+    }
+}
+
+/// Runs the pipeline on `data` (read from `path`) for `command` (`fit` or `diagnose`):
+/// the setup ([`FitContext::new`]), the first fit ([`first_fit`]), with
+/// [`PipelineConfig::diagnose`] the diagnosis loop, then the final residual analysis
+/// and the summary.
+pub fn run(
+    data: &Frf,
+    path: &str,
+    cfg: &PipelineConfig,
+    command: &str,
+) -> Result<PipelineOutput, FrfitError> {
+    let t0 = Instant::now();
+    let mut timings = Timings::default();
+    let ctx = FitContext::timed(data, cfg, &mut timings)?;
+    let t = Instant::now();
+    let first = first_fit(&ctx, cfg)?;
+    let (fit, fitter_report) = (first.fit, first.report);
+    timings.stage("fit", t);
+    let initial_model = fit.model.clone();
+    let initial_response = initial_model.response_at(&ctx.omega);
+    let initial_errors = error_stats(&ctx.band, &initial_response, &ctx.noise);
+    let Diagnosis {
+        fit,
+        steps,
+        step_responses,
+    } = if cfg.diagnose {
+        let t = Instant::now();
+        let d = diagnose(&ctx, cfg, fit, &initial_response)?;
+        timings.stage("diagnose", t);
+        d
+    } else {
+        Diagnosis {
+            fit,
+            steps: Vec::new(),
+            step_responses: Vec::new(),
+        }
+    };
+    let final_response = fit.model.response_at(&ctx.omega);
+    let analysis = analyze_residual(
+        &ctx.band,
+        &final_response,
+        &ctx.noise,
+        &ctx.residual_config(&fit.model),
+    )
+    .map_err(err("residual analysis"))?;
+    let final_errors = error_stats(&ctx.band, &final_response, &ctx.noise);
+    timings.stage("total", t0);
+    let summary = build_summary(
+        &ctx,
+        cfg,
+        RunRecord {
+            path,
+            command,
+            initial_model: &initial_model,
+            fitter_report: &fitter_report,
+            initial_errors,
+            steps,
+            fit: &fit,
+            analysis: &analysis,
+            final_errors,
+            timings: timings.0,
+            chain: first.chain.clone(),
+        },
+    );
+    let peaks = fitter_report.cmif_peaks.clone();
+    let FitContext {
+        band, noise, cmif, ..
+    } = ctx;
+    Ok(PipelineOutput {
+        band,
+        fit,
+        fitter_report,
+        chain: first.chain,
+        links: first.links,
+        noise,
+        cmif,
+        peaks,
+        initial_response,
+        final_response,
+        step_responses,
+        summary,
+    })
+}
