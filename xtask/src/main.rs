@@ -4,7 +4,10 @@
 //! - `wafer-stage`: the full reference pipeline without input files: simulate the
 //!   wafer-stage experiment, estimate its FRF, fit and diagnose it with frfit, and
 //!   validate the model against the simulator's truth.
+//! - `oomen-bosgra`: Section 6 of Oomen and Bosgra (model validation with disturbance
+//!   models from periodic averaging): `gamma.csv` and Figure 5.
 
+mod oomen_bosgra;
 mod validate;
 mod wafer_stage;
 
@@ -30,6 +33,9 @@ enum Task {
     /// Reference pipeline on the simulated wafer stage: simulate, estimate the FRF, fit
     /// and diagnose, validate against the known truth (no input files needed).
     WaferStage(wafer_stage::Args),
+    /// Section 6 of Oomen and Bosgra: the minimum uncertainty per validation line for
+    /// 100, 1000 and 10000 periods against the true model error (gamma.csv, Figure 5).
+    OomenBosgra(oomen_bosgra::Args),
 }
 
 /// An error of a task: which stage failed and why.
@@ -74,6 +80,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.task {
         Some(Task::WaferStage(args)) => wafer_stage::run(args),
+        Some(Task::OomenBosgra(args)) => oomen_bosgra::run(args),
         None => {
             let mut cmd = Cli::command();
             match cmd.print_help() {

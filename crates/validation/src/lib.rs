@@ -42,14 +42,29 @@
 //! # Ok(()) }
 //! ```
 
+pub(crate) mod cmat;
+pub mod disturbance;
 pub mod error;
+pub mod frf_validation;
+pub mod invalidation;
+pub mod mu;
 pub mod noise;
 pub mod residual;
+pub mod section6;
 mod serde_f64;
 pub mod signatures;
 pub mod stats;
 
+pub use disturbance::{chi2_2_quantile, Coverage, DisturbanceModel};
 pub use error::ValidationError;
+pub use frf_validation::{
+    validate_frf, FrfValidation, FrfValidationConfig, GammaMethod, LineValidation, Verdict,
+};
+pub use invalidation::{
+    invalidation_mu, min_gamma, min_gamma_additive, GammaConfig, LineData, MinGamma,
+    UncertaintyModel,
+};
+pub use mu::{generalized_mu_bounds, mu_bounds, Block, BlockStructure, MuBounds, MuConfig};
 pub use noise::{estimate_noise, noise_level, NoiseConfig, NoiseLevel, NoiseSource};
 pub use residual::{
     analyze_residual, concentration, magnitude_trend, relative_error_stats, Concentration, Effect,

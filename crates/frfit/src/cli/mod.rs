@@ -14,6 +14,7 @@ pub mod model_opts;
 pub mod nonparametric;
 pub mod output;
 pub mod simulate;
+pub mod validate;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -46,6 +47,9 @@ pub enum Command {
     Eval(eval::Args),
     /// Fit, then trace the residual to effects the model lacks; write a report.
     Diagnose(diagnose::Args),
+    /// Minimum additive uncertainty per line against an independent validation FRF
+    /// (Oomen-Bosgra); write DIR/validation.json and DIR/report.md.
+    Validate(validate::Args),
 }
 
 /// Runs the parsed command line.
@@ -59,5 +63,6 @@ pub fn run(cli: Cli) -> Result<(), FrfitError> {
         Command::Fit(a) => fit::run(a, quiet),
         Command::Eval(a) => eval::run(a, quiet),
         Command::Diagnose(a) => diagnose::run(a, quiet),
+        Command::Validate(a) => validate::run(a, quiet),
     }
 }

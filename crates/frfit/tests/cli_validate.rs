@@ -1,0 +1,177 @@
+//! `frfit validate` through the binary on the simulated 2 x 3 plant of the CLI tests
+//! (exact values with a variance of (1e-3 |G|)^2): a fitted model gets gamma at or
+//! below its error; the same model with the 80 Hz mode removed gets, at 80 Hz, a gamma
+//! of at least half the removed mode's response there; bad input is reported.
+
+use frf_data::io::read_frf_csv;
+use frf_data::FrfDataset;
+
+mod common;
+use common::*;
+
+fn read_json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn validate(
+    model: &std::path::Path,
+    csv: &std::path::Path,
+    out: &std::path::Path,
+) -> serde_json::Value {
+    let o = run(&[
+        "validate",
+        model.to_str().unwrap(),
+        "--data",
+        csv.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("report.md").exists() && out.join("gamma.svg").exists());
+    read_json(&out.join("validation.json"))
+}
+
+#[test]
+fn validate_a_fitted_model_and_one_with_a_mode_removed() {
+    let dir = temp_dir("validate");
+    let csv = write_plant(&dir, 0.0);
+    let model = dir.join("model.json");
+    let o = run(&[
+        "fit",
+        csv.to_str().unwrap(),
+        "--delay",
+        "none",
+        "--out",
+        model.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let v = validate(&model, &csv, &dir.join("full"));
+    assert_eq!(v["alpha"].as_f64(), Some(0.99));
+    let lines = v["lines"].as_array().unwrap();
+    assert_eq!(lines.len(), 781);
+    for l in lines {
+        let (g, e) = (
+            l["gamma"].as_f64().unwrap(),
+            l["model_error"].as_f64().unwrap(),
+        );
+        assert!(l["f_hz"].as_f64().is_some() && l["disturbance_bound"].as_f64().unwrap() > 0.0);
+        assert!(
+            g >= 0.0 && g <= e * (1.0 + 1e-9),
+            "gamma {g} above the model error {e}"
+        );
+    }
+    let verdict = v["verdict"].as_str().unwrap();
+    assert!(verdict == "not_invalidated" || verdict == "invalidated_at_zero_uncertainty");
+    let gmax = v["gamma_max"].as_f64().unwrap();
+    let gmed = v["gamma_median"].as_f64().unwrap();
+    assert!(gmax >= gmed && gmed >= 0.0);
+
+    // remove the mode nearest 80 Hz
+    let mut json = read_json(&model);
+    let modes = json["modes"].as_array_mut().unwrap();
+    let idx = (0..modes.len())
+        .min_by(|&a, &b| {
+            let fa = (modes[a]["f_hz"].as_f64().unwrap() - 80.0).abs();
+            let fb = (modes[b]["f_hz"].as_f64().unwrap() - 80.0).abs();
+            fa.total_cmp(&fb)
+        })
+        .unwrap();
+    assert!((modes[idx]["f_hz"].as_f64().unwrap() - 80.0).abs() < 1.0);
+    modes.remove(idx);
+    // the exact model is rebuilt from the submodels: drop the same mode there (the mode
+    // submodels are in the order of `modes`)
+    let subs = json["submodels"].as_array_mut().unwrap();
+    let sub_idx = (0..subs.len())
+        .filter(|&i| subs[i]["kind"].as_str() == Some("mode"))
+        .nth(idx)
+        .unwrap();
+    subs.remove(sub_idx);
+    let reduced = dir.join("reduced.json");
+    std::fs::write(&reduced, serde_json::to_string(&json).unwrap()).unwrap();
+    let vr = validate(&reduced, &csv, &dir.join("reduced"));
+    assert_eq!(
+        vr["verdict"].as_str(),
+        Some("invalidated_at_zero_uncertainty")
+    );
+
+    // the removed mode's response at 80 Hz: the two models' predictions differ by it
+    let pred = |m: &std::path::Path, name: &str| {
+        let p = dir.join(name);
+        let o = run(&[
+            "eval",
+            m.to_str().unwrap(),
+            "--at",
+            csv.to_str().unwrap(),
+            "--out",
+            p.to_str().unwrap(),
+            "--quiet",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        read_frf_csv(&p).unwrap()
+    };
+    let (pf, pr) = (pred(&model, "full.csv"), pred(&reduced, "reduced.csv"));
+    let k = (0..pf.n_lines())
+        .min_by(|&a, &b| {
+            (pf.freq_hz(a) - 80.0)
+                .abs()
+                .total_cmp(&(pf.freq_hz(b) - 80.0).abs())
+        })
+        .unwrap();
+    let d = faer::Mat::from_fn(2, 3, |i, j| pf.value(k, i, j) - pr.value(k, i, j));
+    let mode_resp = d.singular_values().unwrap()[0];
+    let g = faer::Mat::from_fn(2, 3, |i, j| pf.value(k, i, j));
+    assert!(
+        mode_resp > 0.5 * g.singular_values().unwrap()[0],
+        "the 80 Hz mode was not removed"
+    );
+    let gamma_80 = vr["lines"][k]["gamma"].as_f64().unwrap();
+    println!("80 Hz: gamma {gamma_80:.4e}, removed mode's response {mode_resp:.4e}");
+    assert!(
+        gamma_80 >= 0.5 * mode_resp,
+        "gamma {gamma_80} < half of {mode_resp}"
+    );
+}
+
+#[test]
+fn validate_reports_bad_input() {
+    let dir = temp_dir("validate-bad");
+    let csv = write_plant(&dir, 0.0);
+    let model = dir.join("model.json");
+    let o = run(&[
+        "fit",
+        csv.to_str().unwrap(),
+        "--delay",
+        "none",
+        "--out",
+        model.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = dir.join("v");
+    let o = run(&[
+        "validate",
+        model.to_str().unwrap(),
+        "--data",
+        csv.to_str().unwrap(),
+        "--alpha",
+        "1.5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--alpha"), "{}", stderr(&o));
+    let missing = dir.join("missing.json");
+    let o = run(&[
+        "validate",
+        missing.to_str().unwrap(),
+        "--data",
+        csv.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("missing.json"), "{}", stderr(&o));
+}

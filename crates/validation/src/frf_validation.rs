@@ -1,0 +1,275 @@
+//! Validation of a model against an independent nonparametric FRF measurement (the
+//! FDMVOP of Oomen and Bosgra per line, [`crate::invalidation`]), independent of how the
+//! model was made: only its response at the validation lines is needed.
+//!
+//! **Per line and input.** The validation FRF `G` (period means, `G = Y_bar U_bar^-1`)
+//! is read as `nu` experiments, experiment `j` with the unit input `W = e_j` and the
+//! measured output `Z_m = G[:, j]`; the nominal residual is `E[:, j] = G[:, j] -
+//! P^[:, j]`. Its disturbance is the estimate's noise in that column: with the
+//! disturbance covariance `C_v` of the measurement, `C_v s_j` with `s_j` the mean over
+//! outputs of `var(G[i, j]) / C_v[i, i]` (the factor `sum_e |U_bar^-1[e, j]|^2 / P` of
+//! the estimator, eq. (25)'s averaging included); without it the per-entry variances
+//! with `T_V = I`. [`crate::DisturbanceModel`] turns it into radii (Prop. 9, coverage
+//! [`Coverage`], default `alpha` for the whole output vector of a column). The smallest
+//! additive uncertainty explaining column `j` is `gamma_j` ([`min_gamma_additive`]: exact
+//! for additive uncertainty; [`GammaMethod::Mu`] runs the mu bisection of
+//! [`min_gamma`] instead, same value to its tolerance where the bounds are tight).
+//!
+//! **The line's gamma.** One `Delta_u` must explain all columns. Each column needs
+//! `|Delta_u e_j| >= gamma_j`, so `gamma_lower = max_j gamma_j` is necessary; the
+//! columns `r_j` the uncertainty explains in each column's solution form one admissible
+//! `Delta_u = [r_1 ... r_nu]`, so `gamma = sigma_max([r_1 ... r_nu])` suffices (for one
+//! input both are the same). [`LineValidation::gamma`] is that certified value.
+//!
+//! **Verdict.** The model is `invalidated_at_zero_uncertainty` when some line has a
+//! column the disturbance cannot explain on its own at the joint level (coverage
+//! [`Coverage::JointLines`] over all lines and inputs: the true system is declared
+//! invalid with probability at most `1 - alpha` over the whole band), otherwise
+//! `not_invalidated`.
+
+use crate::cmat::CMat;
+use crate::disturbance::{check_alpha, Coverage, DisturbanceModel};
+use crate::invalidation::{min_gamma, min_gamma_additive, GammaConfig, LineData, UncertaintyModel};
+use crate::stats::median;
+use crate::ValidationError;
+use faer::Mat;
+use frf_data::{FrfDataset, C64};
+use realize::ResponseGrid;
+use serde::{Deserialize, Serialize};
+
+/// How each column's minimum `gamma` is computed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GammaMethod {
+    /// The exact additive closed form (default).
+    #[default]
+    ClosedForm,
+    /// The mu bisection (Proposition 12).
+    Mu,
+}
+
+/// Settings of [`validate_frf`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrfValidationConfig {
+    /// Probability level (default 0.99).
+    pub alpha: f64,
+    /// Coverage of the per-line gammas (default [`Coverage::JointOutputs`]).
+    pub coverage: Coverage,
+    /// Method (default [`GammaMethod::ClosedForm`]).
+    pub method: GammaMethod,
+    /// Bisection settings for [`GammaMethod::Mu`].
+    pub gamma: GammaConfig,
+}
+
+impl Default for FrfValidationConfig {
+    fn default() -> Self {
+        Self {
+            alpha: 0.99,
+            coverage: Coverage::JointOutputs,
+            method: GammaMethod::ClosedForm,
+            gamma: GammaConfig::default(),
+        }
+    }
+}
+
+/// The verdict of the validation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// The disturbance model explains the residual on every line.
+    NotInvalidated,
+    /// Some line needs a nonzero uncertainty.
+    InvalidatedAtZeroUncertainty,
+}
+
+/// The result at one line.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LineValidation {
+    /// Frequency, Hz.
+    pub f_hz: f64,
+    /// Certified minimum additive uncertainty `sigma_max(Delta_u)`.
+    pub gamma: f64,
+    /// Necessary minimum (`max_j gamma_j`).
+    pub gamma_lower: f64,
+    /// The largest disturbance radius of the line (`max_j max_q V~_q`, FRF units).
+    pub disturbance_bound: f64,
+    /// `sigma_max(G - P^)`, the nominal model error seen by the data.
+    pub model_error: f64,
+}
+
+/// The result of [`validate_frf`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrfValidation {
+    /// Probability level.
+    pub alpha: f64,
+    /// Per line.
+    pub lines: Vec<LineValidation>,
+    /// Verdict at the joint level (see the module documentation).
+    pub verdict: Verdict,
+    /// Largest `gamma`.
+    pub gamma_max: f64,
+    /// Median `gamma`.
+    pub gamma_median: f64,
+    /// Lines where the disturbance alone does not explain the residual at the joint
+    /// level (the verdict's evidence).
+    pub lines_invalidated_at_zero: usize,
+}
+
+/// Validates the model response `model` (at the data's lines) against the validation
+/// FRF `data` with its variance, optionally with the disturbance covariance `C_v` per
+/// line (`ny x ny` column-major, line after line, as the nonparametric estimator gives
+/// it). See the module documentation.
+pub fn validate_frf(
+    model: &ResponseGrid,
+    data: &(impl FrfDataset + ?Sized),
+    covariance: Option<&[C64]>,
+    cfg: &FrfValidationConfig,
+) -> Result<FrfValidation, ValidationError> {
+    check_alpha(cfg.alpha)?;
+    let (ny, nu, nl) = (data.ny(), data.nu(), data.n_lines());
+    if model.len() != nl || model.ny != ny || model.nu != nu {
+        return Err(ValidationError::dimension(
+            "model response vs validation data",
+            format!("{nl} lines of {ny} x {nu}"),
+            format!("{} lines of {} x {}", model.len(), model.ny, model.nu),
+        ));
+    }
+    if nl == 0 {
+        return Err(ValidationError::TooFewLines {
+            what: "validation".into(),
+            needed: 1,
+            got: 0,
+        });
+    }
+    if !data.has_variance() {
+        return Err(ValidationError::invalid_input(
+            "validation data",
+            "no variance: validation needs the `_var` columns of a periodic (averaged) \
+             measurement to bound the disturbance",
+        ));
+    }
+    if let Some(c) = covariance {
+        if c.len() != nl * ny * ny {
+            return Err(ValidationError::dimension(
+                "disturbance covariance vs validation data",
+                format!("{} values ({nl} lines of {ny} x {ny})", nl * ny * ny),
+                format!("{} values", c.len()),
+            ));
+        }
+    }
+    let joint = Coverage::JointLines { n_lines: nl * nu };
+    let unc = UncertaintyModel::additive(ny, nu);
+    let mut lines = Vec::with_capacity(nl);
+    let mut n_invalid = 0;
+    let mut var = vec![0.0; ny * nu];
+    for k in 0..nl {
+        let f = data.freq_hz(k);
+        data.variance_line_into(k, &mut var);
+        if let Some((e, v)) = var
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !(v.is_finite() && **v >= 0.0))
+        {
+            return Err(ValidationError::invalid_input(
+                "validation data",
+                format!(
+                    "line {} ({f} Hz), entry ({}, {}): variance {v}",
+                    k + 1,
+                    e % ny + 1,
+                    e / ny + 1
+                ),
+            ));
+        }
+        let g = data.matrix(k);
+        let p = model.matrix(k);
+        if !CMat::from_faer(&g).is_finite() || !CMat::from_faer(&p).is_finite() {
+            return Err(ValidationError::invalid_input(
+                "validation line",
+                format!(
+                    "line {} ({f} Hz): a data or model value is not finite",
+                    k + 1
+                ),
+            ));
+        }
+        let err = Mat::from_fn(ny, nu, |i, j| g[(i, j)] - p[(i, j)]);
+        let model_error = CMat::from_faer(&err).sigma_max();
+        let mut r = CMat::zeros(ny, nu);
+        let mut gamma_lower: f64 = 0.0;
+        let mut dbound: f64 = 0.0;
+        let mut invalid_here = false;
+        for j in 0..nu {
+            let colvar = &var[j * ny..(j + 1) * ny];
+            let cov_col = |cov: Coverage| -> Result<DisturbanceModel, ValidationError> {
+                match covariance {
+                    Some(c) => {
+                        let cv = &c[k * ny * ny..(k + 1) * ny * ny];
+                        let (mut s, mut n) = (0.0, 0);
+                        for i in 0..ny {
+                            let cii = cv[i * ny + i].re;
+                            if cii > 0.0 {
+                                s += colvar[i] / cii;
+                                n += 1;
+                            }
+                        }
+                        let s = if n > 0 { s / n as f64 } else { 0.0 };
+                        let m = Mat::from_fn(ny, ny, |a, b| cv[b * ny + a] * s);
+                        DisturbanceModel::from_covariance(&m, cfg.alpha, cov)
+                    }
+                    None => DisturbanceModel::from_variances(colvar, cfg.alpha, cov),
+                }
+            };
+            let dist = cov_col(cfg.coverage)?;
+            let line = LineData {
+                w: (0..nu)
+                    .map(|c| C64::new(if c == j { 1.0 } else { 0.0 }, 0.0))
+                    .collect(),
+                z_m: (0..ny).map(|i| g[(i, j)]).collect(),
+                nominal: p.clone(),
+            };
+            dbound = dbound.max(dist.max_radius());
+            let (gj_lower, rj) = match cfg.method {
+                GammaMethod::ClosedForm => {
+                    let (g, r) = min_gamma_additive(&line, &dist)?;
+                    (g, r)
+                }
+                GammaMethod::Mu => {
+                    let m = min_gamma(&unc, &line, &dist, &cfg.gamma)?;
+                    (m.gamma_lower, m.explained_by_uncertainty)
+                }
+            };
+            gamma_lower = gamma_lower.max(gj_lower);
+            for i in 0..ny {
+                r[(i, j)] = rj[i];
+            }
+            // the verdict at the joint level: does the disturbance alone explain it?
+            let dj = cov_col(joint)?;
+            let (g0, _) = min_gamma_additive(&line, &dj)?;
+            if g0 > 0.0 {
+                invalid_here = true;
+            }
+        }
+        if invalid_here {
+            n_invalid += 1;
+        }
+        lines.push(LineValidation {
+            f_hz: f,
+            gamma: r.sigma_max().max(gamma_lower),
+            gamma_lower,
+            disturbance_bound: dbound,
+            model_error,
+        });
+    }
+    let gammas: Vec<f64> = lines.iter().map(|l| l.gamma).collect();
+    Ok(FrfValidation {
+        alpha: cfg.alpha,
+        gamma_max: gammas.iter().copied().fold(0.0, f64::max),
+        gamma_median: median(&gammas),
+        verdict: if n_invalid > 0 {
+            Verdict::InvalidatedAtZeroUncertainty
+        } else {
+            Verdict::NotInvalidated
+        },
+        lines_invalidated_at_zero: n_invalid,
+        lines,
+    })
+}

@@ -1,0 +1,152 @@
+//! validate_frf against known answers: a noise-free MIMO measurement (gamma is the
+//! largest singular value of the model error), the SISO closed form, the mu method
+//! against the closed form, the verdict for the true model, and bad input.
+
+use frf_data::{Frf, C64};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use realize::ResponseGrid;
+use validation::{validate_frf, FrfValidationConfig, GammaMethod, Verdict};
+
+fn c(rng: &mut ChaCha8Rng) -> C64 {
+    C64::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5)
+}
+
+/// `(truth, model, data)` with `n` lines of `ny x nu`, model error `err_scale`, noise
+/// variance `var` per entry.
+fn problem(
+    n: usize,
+    ny: usize,
+    nu: usize,
+    err_scale: f64,
+    var: f64,
+    seed: u64,
+) -> (Vec<C64>, ResponseGrid, Frf) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let m = ny * nu;
+    let truth: Vec<C64> = (0..n * m).map(|_| c(&mut rng) * 4.0).collect();
+    let model = ResponseGrid {
+        ny,
+        nu,
+        values: truth.iter().map(|t| t + c(&mut rng) * err_scale).collect(),
+    };
+    let sd = (var / 2.0).sqrt();
+    let data: Vec<C64> = truth
+        .iter()
+        .map(|t| {
+            let a: f64 = StandardNormal.sample(&mut rng);
+            let b: f64 = StandardNormal.sample(&mut rng);
+            t + C64::new(a, b) * sd
+        })
+        .collect();
+    let freq: Vec<f64> = (1..=n).map(|k| k as f64).collect();
+    let frf = Frf::new(freq, ny, nu, data, Some(vec![var; n * m])).unwrap();
+    (truth, model, frf)
+}
+
+#[test]
+fn noise_free_mimo_gamma_is_the_model_error() {
+    let (truth, model, data) = problem(20, 3, 2, 0.3, 1e-30, 1);
+    let v = validate_frf(&model, &data, None, &FrfValidationConfig::default()).unwrap();
+    for (k, l) in v.lines.iter().enumerate() {
+        let e = faer::Mat::from_fn(3, 2, |i, j| truth[k * 6 + j * 3 + i] - model.get(k, i, j));
+        let s = e.singular_values().unwrap()[0];
+        assert!(
+            (l.gamma - s).abs() < 1e-9 * (1.0 + s),
+            "line {k}: {} vs {s}",
+            l.gamma
+        );
+        assert!(l.gamma_lower <= l.gamma + 1e-12);
+    }
+    assert_eq!(v.verdict, Verdict::InvalidatedAtZeroUncertainty);
+}
+
+#[test]
+fn siso_closed_form_and_mu_method() {
+    let (_, model, data) = problem(30, 1, 1, 0.2, 0.01, 2);
+    let cfg = FrfValidationConfig::default();
+    let v = validate_frf(&model, &data, None, &cfg).unwrap();
+    let vt = (0.01 * -(1.0f64 - 0.99).ln()).sqrt(); // Prop. 9, one output
+    for (k, l) in v.lines.iter().enumerate() {
+        let e = (data.values()[k] - model.values[k]).norm();
+        let expect = (e - vt).max(0.0);
+        assert!((l.gamma - expect).abs() < 1e-12, "{} vs {expect}", l.gamma);
+        assert!((l.disturbance_bound - vt).abs() < 1e-12);
+    }
+    let mu = validate_frf(
+        &model,
+        &data,
+        None,
+        &FrfValidationConfig {
+            method: GammaMethod::Mu,
+            ..cfg
+        },
+    )
+    .unwrap();
+    for (a, b) in v.lines.iter().zip(&mu.lines) {
+        assert!(
+            (a.gamma - b.gamma).abs() < 1e-6 * (1.0 + a.gamma),
+            "{} vs {}",
+            a.gamma,
+            b.gamma
+        );
+    }
+}
+
+/// The true system (zero model error) is not invalidated: over the whole band at the
+/// joint level, with probability 0.99 (this seed); its gammas are at the noise level.
+#[test]
+fn the_true_model_is_not_invalidated() {
+    let (truth, _, data) = problem(500, 2, 2, 0.0, 0.04, 3);
+    let model = ResponseGrid {
+        ny: 2,
+        nu: 2,
+        values: truth,
+    };
+    let v = validate_frf(&model, &data, None, &FrfValidationConfig::default()).unwrap();
+    assert_eq!(
+        v.verdict,
+        Verdict::NotInvalidated,
+        "{} lines",
+        v.lines_invalidated_at_zero
+    );
+    // per line (alpha = 0.99 per column vector) about 2 % of the lines need a little
+    let nonzero = v.lines.iter().filter(|l| l.gamma > 0.0).count();
+    assert!(nonzero < 30, "{nonzero} lines with gamma > 0");
+    assert!(v.gamma_max < 0.2, "gamma_max {}", v.gamma_max);
+}
+
+#[test]
+fn bad_input_is_reported() {
+    let (_, model, data) = problem(5, 1, 1, 0.1, 0.01, 4);
+    let short = ResponseGrid {
+        ny: 1,
+        nu: 1,
+        values: model.values[..4].to_vec(),
+    };
+    let e = validate_frf(&short, &data, None, &FrfValidationConfig::default()).unwrap_err();
+    assert!(
+        e.to_string().contains("model response vs validation data"),
+        "{e}"
+    );
+    let nov = Frf::new(vec![1.0; 1], 1, 1, vec![C64::new(1.0, 0.0)], None).unwrap();
+    let m1 = ResponseGrid {
+        ny: 1,
+        nu: 1,
+        values: vec![C64::new(1.0, 0.0)],
+    };
+    let e = validate_frf(&m1, &nov, None, &FrfValidationConfig::default()).unwrap_err();
+    assert!(e.to_string().contains("no variance"), "{e}");
+    let e = validate_frf(
+        &model,
+        &data,
+        None,
+        &FrfValidationConfig {
+            alpha: 1.5,
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("alpha"), "{e}");
+}
