@@ -4,7 +4,9 @@
 //! - `wafer-stage`: the full reference pipeline without input files: simulate the
 //!   wafer-stage experiment, estimate its FRF, fit and diagnose it with frfit, and
 //!   validate the model against the simulator's truth.
+//! - `fuzz READER --runs N`: coverage-guided fuzzing of one reader (see `fuzz.rs`).
 
+mod fuzz;
 mod validate;
 mod wafer_stage;
 
@@ -30,6 +32,9 @@ enum Task {
     /// Reference pipeline on the simulated wafer stage: simulate, estimate the FRF, fit
     /// and diagnose, validate against the known truth (no input files needed).
     WaferStage(wafer_stage::Args),
+    /// Coverage-guided fuzzing of one reader (csv, uff, spectra, mat, model-json) with
+    /// libFuzzer through cargo-fuzz, corpus seeded from ../shared/data.
+    Fuzz(fuzz::Args),
 }
 
 /// An error of a task: which stage failed and why.
@@ -74,6 +79,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.task {
         Some(Task::WaferStage(args)) => wafer_stage::run(args),
+        Some(Task::Fuzz(args)) => fuzz::run(args),
         None => {
             let mut cmd = Cli::command();
             match cmd.print_help() {
