@@ -6,7 +6,9 @@
 //!   validate the model against the simulator's truth.
 //! - `oomen-bosgra`: Section 6 of Oomen and Bosgra (model validation with disturbance
 //!   models from periodic averaging): `gamma.csv` and Figure 5.
+//! - `fuzz READER --runs N`: coverage-guided fuzzing of one reader (see `fuzz.rs`).
 
+mod fuzz;
 mod oomen_bosgra;
 mod validate;
 mod wafer_stage;
@@ -36,6 +38,9 @@ enum Task {
     /// Section 6 of Oomen and Bosgra: the minimum uncertainty per validation line for
     /// 100, 1000 and 10000 periods against the true model error (gamma.csv, Figure 5).
     OomenBosgra(oomen_bosgra::Args),
+    /// Coverage-guided fuzzing of one reader (csv, uff, spectra, mat, model-json) with
+    /// libFuzzer through cargo-fuzz, corpus seeded from ../shared/data.
+    Fuzz(fuzz::Args),
 }
 
 /// An error of a task: which stage failed and why.
@@ -81,6 +86,7 @@ fn main() -> ExitCode {
     let result = match cli.task {
         Some(Task::WaferStage(args)) => wafer_stage::run(args),
         Some(Task::OomenBosgra(args)) => oomen_bosgra::run(args),
+        Some(Task::Fuzz(args)) => fuzz::run(args),
         None => {
             let mut cmd = Cli::command();
             match cmd.print_help() {

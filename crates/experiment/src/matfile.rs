@@ -2,10 +2,11 @@
 //! files, as `FORMATS.md` describes them: numeric vectors and matrices among other
 //! variables (structs, cells, strings, MCOS objects such as `tf`) that are skipped.
 //!
-//! The parsing is done by the `matrw` crate: `matfile` 0.5 fails on the whole file as
-//! soon as it holds an MCOS object (for example the `tf` object in
-//! `fditools_motorbench_msA.mat`), `matrw` reports such variables as unsupported and
-//! reads the rest, including doubles stored in a compact integer type.
+//! The parsing is done by [`crate::io::mat5`] (a reader of the level-5 subset written for
+//! this project, which returns errors instead of panicking on damaged files): MCOS
+//! objects (for example the `tf` object in `fditools_motorbench_msA.mat`) and other
+//! non-numeric variables are listed as skipped, and doubles stored in a compact integer
+//! type are read.
 
 use frf_data::{FormatProblem, FrfError};
 use std::collections::BTreeMap;
@@ -49,32 +50,6 @@ pub struct MatFile {
     pub skipped: Vec<(String, String)>,
 }
 
-fn to_f64(t: &matrw::MatlabType) -> Option<Vec<f64>> {
-    use matrw::MatlabType as T;
-    Some(match t {
-        T::U8(v) => v.iter().map(|&x| x as f64).collect(),
-        T::I8(v) => v.iter().map(|&x| x as f64).collect(),
-        T::U16(v) => v.iter().map(|&x| x as f64).collect(),
-        T::I16(v) => v.iter().map(|&x| x as f64).collect(),
-        T::U32(v) => v.iter().map(|&x| x as f64).collect(),
-        T::I32(v) => v.iter().map(|&x| x as f64).collect(),
-        T::U64(v) => v.iter().map(|&x| x as f64).collect(),
-        T::I64(v) => v.iter().map(|&x| x as f64).collect(),
-        T::F32(v) => v.iter().map(|&x| x as f64).collect(),
-        T::F64(v) => v.clone(),
-        T::UTF8(_) | T::UTF16(_) | T::BOOL(_) => return None,
-    })
-}
-
-fn kind_of(t: &matrw::MatlabType) -> &'static str {
-    use matrw::MatlabType as T;
-    match t {
-        T::UTF8(_) | T::UTF16(_) => "char",
-        T::BOOL(_) => "logical",
-        _ => "numeric",
-    }
-}
-
 impl MatFile {
     /// Reads `path`. Errors name the file; a file that is not a level-5 MAT-file (or is
     /// a v7.3 HDF5 one) is a [`FormatProblem::BadRecord`].
@@ -90,74 +65,29 @@ impl MatFile {
 
     /// Parses the bytes of a `.mat` file; `name` is used in errors.
     pub fn from_bytes(bytes: &[u8], name: &str) -> Result<Self, FrfError> {
-        if bytes.len() < 128 {
-            return Err(FrfError::format(
-                name,
-                0,
-                None,
-                FormatProblem::BadRecord,
-                "too short for a MATLAB .mat file (no 128-byte header)",
-            ));
-        }
-        // A parser panic on a malformed file must not take the program down.
-        let parsed = std::panic::catch_unwind(|| matrw::load_matfile_from_u8(bytes));
-        let mat = match parsed {
-            Ok(Ok(m)) => m,
-            Ok(Err(e)) => {
-                return Err(FrfError::format(
-                    name,
-                    0,
-                    None,
-                    FormatProblem::BadRecord,
-                    format!("not a readable MATLAB level-5 (v5/v7) .mat file: {e}"),
-                ))
-            }
-            Err(_) => {
-                return Err(FrfError::format(
-                    name,
-                    0,
-                    None,
-                    FormatProblem::BadRecord,
-                    "malformed MATLAB .mat file (the parser gave up)",
-                ))
-            }
-        };
+        // Our own level-5 reader: it returns an error, never panics, on any input.
+        let vars = crate::io::mat5::parse_mat5(bytes, name)?;
         let mut arrays = BTreeMap::new();
         let mut skipped = Vec::new();
-        for (var_name, var) in mat.iter() {
-            use matrw::MatVariable as V;
-            let kind = match var {
-                V::NumericArray(a) => match to_f64(&a.value) {
-                    Some(real) => {
-                        let imag = a.value_cmp.as_ref().and_then(to_f64);
-                        let mut dims = a.dim.clone();
-                        while dims.len() < 2 {
-                            dims.push(1);
-                        }
-                        if var_name.is_empty() {
-                            // the subsystem data of MCOS objects: no user variable
-                            continue;
-                        }
-                        arrays.insert(
-                            var_name.clone(),
-                            MatArray {
-                                name: var_name.clone(),
-                                dims,
-                                real,
-                                imag,
-                            },
-                        );
-                        continue;
-                    }
-                    None => kind_of(&a.value),
-                },
-                V::SparseArray(_) => "sparse",
-                V::StructureArray(_) | V::Structure(_) => "struct",
-                V::CellArray(_) => "cell",
-                _ => "object",
-            };
-            if !var_name.is_empty() {
-                skipped.push((var_name.clone(), kind.to_string()));
+        for v in vars {
+            use crate::io::mat5::MatValue;
+            if v.name.is_empty() {
+                // the subsystem data of MCOS objects: no user variable
+                continue;
+            }
+            match v.value {
+                MatValue::Numeric { dims, real, imag } => {
+                    arrays.insert(
+                        v.name.clone(),
+                        MatArray {
+                            name: v.name,
+                            dims,
+                            real,
+                            imag,
+                        },
+                    );
+                }
+                MatValue::Other(kind) => skipped.push((v.name, kind.to_string())),
             }
         }
         Ok(Self {

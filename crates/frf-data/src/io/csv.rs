@@ -300,12 +300,21 @@ fn check_announced_dims(
     Ok(())
 }
 
-/// Parses one numeric field; surrounding blanks are allowed.
+/// Parses one numeric field; surrounding blanks are allowed, and so is a Fortran `D`
+/// exponent.
 #[inline]
 fn parse_number(field: &str) -> Option<f64> {
     match field.parse::<f64>() {
         Ok(x) => Some(x),
-        Err(_) => field.trim().parse::<f64>().ok(),
+        Err(_) => {
+            let t = field.trim();
+            t.parse::<f64>().ok().or_else(|| {
+                // Fortran's exponent letter (`1.5D+03`).
+                t.contains(['d', 'D'])
+                    .then(|| t.replace(['d', 'D'], "e").parse::<f64>().ok())
+                    .flatten()
+            })
+        }
     }
 }
 
@@ -324,7 +333,8 @@ fn parse_number(field: &str) -> Option<f64> {
 /// `MissingEntry`, `InconsistentVariance`, `FieldCount`, `NotANumber`, `NonFinite`,
 /// `NegativeVariance`, `NotIncreasing`, `BadFrequency`.
 pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let (text, dialect) = super::dialect::normalize(text, name)?;
+    let text: &str = &text;
     let mut metadata = BTreeMap::new();
     let mut comments = Vec::new();
     let mut lines = text.split('\n').enumerate();
@@ -415,10 +425,18 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
                 return Err(err(c, FormatProblem::NotANumber, detail));
             };
             if !x.is_finite() {
+                let what = if x.is_nan() {
+                    "NaN (not a number)"
+                } else {
+                    "infinite"
+                };
                 return Err(err(
                     c,
                     FormatProblem::NonFinite,
-                    format!("`{}` is not a finite number", shown(field)),
+                    format!(
+                        "`{}` is {what}; every value must be a finite number",
+                        shown(field)
+                    ),
                 ));
             }
             match target {
@@ -494,6 +512,7 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
     }
     let mut frf = Frf::new(freqs, ny, nu, values, has_var.then_some(variance))?;
     frf.units = metadata.get("units").cloned();
+    metadata.insert("csv.dialect".to_string(), dialect.to_string());
     frf.metadata = metadata;
     frf.comments = comments;
     frf.source = Some(name.to_string());

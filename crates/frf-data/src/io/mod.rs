@@ -1,21 +1,34 @@
-//! File formats: the FRF CSV of `FORMATS.md` (read and write) and UFF dataset 58
-//! (read).
+//! File formats: the FRF CSV of `FORMATS.md` (read in every spreadsheet dialect, and
+//! written), UFF dataset 58 (ASCII and binary 58b, read and written) and FRFs in MATLAB
+//! `.mat` files (read and written).
 //!
-//! - [`read_frf_csv`] / [`parse_frf_csv`]: FRF CSV from a file / from text;
+//! - [`read_frf_csv`] / [`parse_frf_csv`]: FRF CSV from a file / from text, in the
+//!   dialect [`dialect::normalize`] detects (BOM, CRLF, quotes, `;` and `,` decimals);
 //! - [`write_frf_csv`] / [`frf_csv_string`]: any [`FrfDataset`] to FRF CSV, bit-exact on
 //!   reading back;
-//! - [`read_uff58`] / [`parse_uff58`]: the FRF records (function type 4) of an ASCII
-//!   Universal File, assembled into one `ny x nu` [`Frf`];
-//! - [`read_frf`]: either, by the file's extension.
+//! - [`read_uff58`] / [`parse_uff58`] / [`parse_uff58_bytes`]: the FRF records
+//!   (function type 4) of a Universal File, ASCII or binary, assembled into one `ny x nu`
+//!   [`Frf`]; [`uff58_bytes`] writes one;
+//! - [`read_frf_mat`] / [`parse_frf_mat`] / [`frf_mat_bytes`]: `G` and `freq_hz` in a
+//!   level-5 `.mat` file, through the own reader [`mat5`];
+//! - [`read_frf`]: any of them, by the file's extension.
 //!
 //! Readers never panic on bad input: they return [`FrfError::Format`] naming the file,
-//! the line and the column, with a [`crate::FormatProblem`] that tells what is wrong.
+//! the line and the column (the variable or byte offset in binary files), with a
+//! [`crate::FormatProblem`] that tells what is wrong.
 
 mod csv;
+pub mod dialect;
+pub mod mat5;
+mod mat_frf;
 mod uff;
+mod uff_binary;
+mod uff_write;
 
 pub use csv::{frf_csv_string, parse_frf_csv};
-pub use uff::parse_uff58;
+pub use mat_frf::{frf_mat_bytes, parse_frf_mat, FREQ_NAMES, FRF_NAMES};
+pub use uff::{parse_uff58, parse_uff58_bytes};
+pub use uff_write::{uff58_bytes, UffEncoding};
 
 use crate::{Frf, FrfDataset, FrfError};
 use std::path::Path;
@@ -60,13 +73,28 @@ pub fn write_frf_csv<D: FrfDataset + ?Sized>(
 /// [`Frf::source`] is the path.
 pub fn read_uff58(path: impl AsRef<Path>) -> Result<Frf, FrfError> {
     let path = path.as_ref();
-    let text = read_text(path)?;
-    parse_uff58(&text, &path.display().to_string())
+    let bytes = std::fs::read(path).map_err(|e| FrfError::Io {
+        file: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    parse_uff58_bytes(&bytes, &path.display().to_string())
+}
+
+/// Reads an FRF from a MATLAB `.mat` file (`G`, `freq_hz`: see [`parse_frf_mat`]);
+/// [`Frf::source`] is the path.
+pub fn read_frf_mat(path: impl AsRef<Path>) -> Result<Frf, FrfError> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|e| FrfError::Io {
+        file: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    parse_frf_mat(&bytes, &path.display().to_string())
 }
 
 /// Reads an FRF file by its extension (case-insensitive): `.csv` as FRF CSV
-/// ([`read_frf_csv`]), `.uff` and `.unv` as UFF 58 ([`read_uff58`]). Any other extension
-/// gives [`FrfError::InvalidParameter`] naming the path.
+/// ([`read_frf_csv`]), `.uff` and `.unv` as UFF 58 ([`read_uff58`]), `.mat` as MATLAB
+/// ([`read_frf_mat`]). Any other extension gives [`FrfError::InvalidParameter`] naming
+/// the path.
 pub fn read_frf(path: impl AsRef<Path>) -> Result<Frf, FrfError> {
     let path = path.as_ref();
     let ext = path
@@ -76,11 +104,12 @@ pub fn read_frf(path: impl AsRef<Path>) -> Result<Frf, FrfError> {
     match ext.as_deref() {
         Some("csv") => read_frf_csv(path),
         Some("uff" | "unv") => read_uff58(path),
+        Some("mat") => read_frf_mat(path),
         _ => Err(FrfError::invalid(
             "FRF file",
             path.display(),
-            "the extension must be .csv (FRF CSV) or .uff/.unv (UFF dataset 58); \
-             call read_frf_csv or read_uff58 directly for other names",
+            "the extension must be .csv (FRF CSV), .uff/.unv (UFF dataset 58) or .mat \
+             (MATLAB); call read_frf_csv, read_uff58 or read_frf_mat directly for other names",
         )),
     }
 }

@@ -28,8 +28,10 @@
 //! (a writer that ignored them), its blank-separated numbers are taken instead.
 //! Fortran forms such as `1.5D+03` and `1.5-100` (exponent without `E`) are understood.
 
+use super::uff_binary::{is_binary_number_line, split_lines, BinaryData};
 use crate::{FormatProblem, Frf, FrfError, C64};
-use std::collections::BTreeMap;
+use std::borrow::Cow;
+use std::collections::{BTreeMap, HashMap};
 
 /// Function type code of an FRF in record 6.
 const FUNCTION_FRF: i64 = 4;
@@ -156,15 +158,23 @@ fn parse_fortran_int(field: &str) -> Option<i64> {
     }
 }
 
-/// The text of the file, split in lines, with error helpers.
+/// The text of the file, split in lines (binary blocks taken out), with error helpers.
 struct Lines<'a> {
     file: &'a str,
-    lines: Vec<&'a str>,
+    lines: Vec<Cow<'a, str>>,
+    /// 1-based line number in the file of each entry of `lines`.
+    line_no: Vec<usize>,
+    /// Decoded record 12 of binary datasets 58, by the index of their marker line.
+    binary: HashMap<usize, BinaryData>,
 }
 
-impl<'a> Lines<'a> {
-    fn get(&self, idx: usize) -> Option<&'a str> {
-        self.lines.get(idx).copied()
+impl Lines<'_> {
+    fn get(&self, idx: usize) -> Option<&str> {
+        self.lines.get(idx).map(|c| c.as_ref())
+    }
+    /// The 1-based line number in the file of line index `idx`.
+    fn no(&self, idx: usize) -> usize {
+        self.line_no.get(idx).copied().unwrap_or(idx + 1)
     }
     fn err(
         &self,
@@ -173,7 +183,7 @@ impl<'a> Lines<'a> {
         problem: FormatProblem,
         detail: String,
     ) -> FrfError {
-        FrfError::format(self.file, idx + 1, column, problem, detail)
+        FrfError::format(self.file, self.no(idx), column, problem, detail)
     }
     fn is_delimiter(&self, idx: usize) -> bool {
         self.get(idx).is_some_and(|l| l.trim() == "-1")
@@ -276,6 +286,8 @@ struct Record {
     reference: Dof,
     ordinate_type: i64,
     even: bool,
+    /// Record 12 was binary (`58b`).
+    binary: bool,
     freq_hz: Vec<f64>,
     values: Vec<C64>,
     abscissa: AxisInfo,
@@ -375,6 +387,7 @@ fn parse_dataset58(
     l: &Lines<'_>,
     s: usize,
     open_idx: usize,
+    binary: bool,
 ) -> Result<(Parsed58, usize), FrfError> {
     // Records 1-11 must all be there and none may be the closing delimiter.
     for r in 0..11 {
@@ -387,7 +400,7 @@ fn parse_dataset58(
                 format!(
                     "dataset 58 opened at line {} ends before its record {} (the header \
                      has 11 records)",
-                    open_idx + 1,
+                    l.no(open_idx),
                     r + 1
                 ),
             ));
@@ -421,14 +434,14 @@ fn parse_dataset58(
                 FormatProblem::BadRecord,
                 format!(
                     "the file ends inside dataset 58 opened at line {} (no closing `-1`)",
-                    open_idx + 1
+                    l.no(open_idx)
                 ),
             ));
         };
         let note = format!(
             "dataset 58 at line {}: function type {func_type} ({}), response {}:{}, \
              reference {}:{}",
-            open_idx + 1,
+            l.no(open_idx),
             function_type_name(func_type),
             rsp_node,
             direction_name(rsp_dir),
@@ -535,6 +548,38 @@ fn parse_dataset58(
     let mut vals: Vec<f64> = Vec::with_capacity(n_values.min(available.saturating_mul(6)));
     let mut line_of_value: Vec<usize> = Vec::new();
     let mut idx = data_start;
+    if binary {
+        // Record 12 was decoded when the file was split in lines (see `uff_binary`).
+        let Some(b) = l.binary.get(&data_start) else {
+            return Err(l.err(
+                data_start.min(l.lines.len().saturating_sub(1)),
+                Some("record 12 (binary data)"),
+                FormatProblem::BadRecord,
+                format!(
+                    "binary dataset 58 opened at line {}: no binary data after its 11 header \
+                     records",
+                    l.no(open_idx)
+                ),
+            ));
+        };
+        if b.values.len() != n_values {
+            return Err(l.err(
+                data_start,
+                Some("record 12 (binary data)"),
+                FormatProblem::BadRecord,
+                format!(
+                    "binary dataset 58 opened at line {}: {} values, record 7 (line {}) \
+                     announces {n_values}",
+                    l.no(open_idx),
+                    b.values.len(),
+                    l.no(r7)
+                ),
+            ));
+        }
+        vals.clone_from(&b.values);
+        line_of_value = vec![data_start; n_values];
+        idx = data_start + 1;
+    }
     while vals.len() < n_values {
         let Some(line) = l.get(idx) else {
             return Err(l.err(
@@ -544,9 +589,9 @@ fn parse_dataset58(
                 format!(
                     "the file ends inside the data of dataset 58 opened at line {}: {} of the \
                      {n_values} values announced in record 7 (line {}) were read",
-                    open_idx + 1,
+                    l.no(open_idx),
                     vals.len(),
-                    r7 + 1
+                    l.no(r7)
                 ),
             ));
         };
@@ -559,7 +604,7 @@ fn parse_dataset58(
                     "dataset 58 ends after {} of the {n_values} data values announced in \
                      record 7 (line {}: {n_points} points, ordinate type {ordinate_type}, {})",
                     vals.len(),
-                    r7 + 1,
+                    l.no(r7),
                     if even { "even" } else { "uneven" }
                 ),
             ));
@@ -592,7 +637,7 @@ fn parse_dataset58(
                     FormatProblem::BadRecord,
                     format!(
                         "the file ends inside dataset 58 opened at line {} (no closing `-1`)",
-                        open_idx + 1
+                        l.no(open_idx)
                     ),
                 ))
             }
@@ -605,7 +650,7 @@ fn parse_dataset58(
                     FormatProblem::BadRecord,
                     format!(
                         "more data than the {n_points} points record 7 (line {}) announces",
-                        r7 + 1
+                        l.no(r7)
                     ),
                 ))
             }
@@ -682,6 +727,7 @@ fn parse_dataset58(
             reference: (ref_node, ref_dir),
             ordinate_type,
             even,
+            binary,
             freq_hz,
             values,
             abscissa,
@@ -718,7 +764,8 @@ fn units_label(s: &str) -> Option<&str> {
 /// exactly once, and all records must share one frequency axis. The mapping is in the
 /// metadata: `uff.outputs` and `uff.inputs` list `node:direction` per row and column
 /// (for example `1:+Z 2:+Z`); `uff.records`, `uff.ordinate`, `uff.abscissa_spacing`,
-/// the data types `uff.abscissa`, `uff.numerator`, `uff.denominator`, and `uff.id1`
+/// `uff.encoding` (ASCII or binary), the data types `uff.abscissa`, `uff.numerator`,
+/// `uff.denominator`, and `uff.id1`
 /// (the first record's description line) describe the file. The abscissa is taken to be
 /// in Hz; its axis and units labels, when set, are kept in `uff.abscissa_label` and
 /// `uff.abscissa_units`. [`Frf::units`] is `numerator/denominator` from the units
@@ -727,23 +774,27 @@ fn units_label(s: &str) -> Option<&str> {
 /// Other datasets (geometry, units, ...) and dataset 58 records of other function types
 /// are skipped and listed in `uff.skipped`. A 0 Hz point whose values are not finite
 /// (some exporters write NaN there) is dropped, noted in `uff.dropped`. Binary datasets
-/// (`58b`) are not supported and give an error.
+/// (`58b`) are read by [`parse_uff58_bytes`] (text cannot hold them).
 ///
 /// Errors are [`FrfError::Format`] with the file, the line and the field: `Empty` for
 /// an empty file, `NotFound` when no FRF record is there, `BadRecord` for malformed or
 /// inconsistent records, `NotANumber`, `NonFinite`, `BadFrequency`, `NotIncreasing`
 /// for bad data, and `MissingEntry` for a response/reference pair without a record.
 pub fn parse_uff58(text: &str, name: &str) -> Result<Frf, FrfError> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut lines: Vec<&str> = text
-        .split('\n')
-        .map(|l| l.strip_suffix('\r').unwrap_or(l))
-        .collect();
-    // The "line" after the final line break is not a line.
-    if lines.last() == Some(&"") {
-        lines.pop();
-    }
-    let l = Lines { file: name, lines };
+    parse_uff58_bytes(text.as_bytes(), name)
+}
+
+/// [`parse_uff58`] on the bytes of a file, which may hold binary datasets (`58b`, both
+/// byte orders, single or double precision: see `uff_binary`); invalid UTF-8 in text
+/// lines is replaced, so that it is reported where it matters.
+pub fn parse_uff58_bytes(bytes: &[u8], name: &str) -> Result<Frf, FrfError> {
+    let split = split_lines(bytes, name)?;
+    let l = Lines {
+        file: name,
+        lines: split.lines,
+        line_no: split.line_no,
+        binary: split.binary,
+    };
     let mut records: Vec<Record> = Vec::new();
     let mut skipped: Vec<String> = Vec::new();
     let mut i = 0;
@@ -777,11 +828,7 @@ pub fn parse_uff58(text: &str, name: &str) -> Result<Frf, FrfError> {
         };
         let word = number_line.split_whitespace().next().unwrap_or("");
         let digits: String = word.chars().take_while(char::is_ascii_digit).collect();
-        let binary = word[digits.len()..].eq_ignore_ascii_case("b")
-            || number_line
-                .as_bytes()
-                .get(6)
-                .is_some_and(|b| b.eq_ignore_ascii_case(&b'b'));
+        let binary = is_binary_number_line(number_line);
         let Ok(number) = digits.parse::<u32>() else {
             return Err(l.err(
                 i + 1,
@@ -790,16 +837,8 @@ pub fn parse_uff58(text: &str, name: &str) -> Result<Frf, FrfError> {
                 format!("`{}` is not a dataset number", number_line.trim()),
             ));
         };
-        if number == 58 && binary {
-            return Err(l.err(
-                i + 1,
-                Some("dataset number"),
-                FormatProblem::BadRecord,
-                "binary dataset 58b is not supported; export the file as ASCII UFF".into(),
-            ));
-        }
         if number == 58 {
-            let (parsed, close) = parse_dataset58(&l, i + 2, open)?;
+            let (parsed, close) = parse_dataset58(&l, i + 2, open, binary)?;
             match parsed {
                 Parsed58::Frf(r) => records.push(*r),
                 Parsed58::Skipped(note) => skipped.push(note),
@@ -813,11 +852,11 @@ pub fn parse_uff58(text: &str, name: &str) -> Result<Frf, FrfError> {
                     FormatProblem::BadRecord,
                     format!(
                         "the file ends inside dataset {number} opened at line {} (no closing `-1`)",
-                        open + 1
+                        l.no(open)
                     ),
                 ));
             };
-            skipped.push(format!("dataset {number} at line {}", open + 1));
+            skipped.push(format!("dataset {number} at line {}", l.no(open)));
             i = close + 1;
         }
     }
@@ -877,7 +916,7 @@ fn assemble(l: &Lines<'_>, records: Vec<Record>, skipped: Vec<String>) -> Result
                      whose record 6 is line {})",
                     dof(r.response),
                     dof(r.reference),
-                    records[prev].header_idx + 1
+                    l.no(records[prev].header_idx)
                 ),
             ));
         }
@@ -900,7 +939,7 @@ fn assemble(l: &Lines<'_>, records: Vec<Record>, skipped: Vec<String>) -> Result
                     "this record's frequency axis ({}) differs from the first FRF record's \
                      (line {}: {}); all records must share one axis",
                     span(&r.freq_hz),
-                    first.r7_idx + 1,
+                    l.no(first.r7_idx),
                     span(&first.freq_hz)
                 ),
             ));
@@ -984,6 +1023,16 @@ fn assemble(l: &Lines<'_>, records: Vec<Record>, skipped: Vec<String>) -> Result
         "mixed"
     };
     md.insert("uff.abscissa_spacing".to_string(), spacing.to_string());
+    let encoding = if records.iter().all(|r| r.binary == first.binary) {
+        if first.binary {
+            "binary (58b)"
+        } else {
+            "ASCII"
+        }
+    } else {
+        "mixed ASCII and binary"
+    };
+    md.insert("uff.encoding".to_string(), encoding.to_string());
     md.insert(
         "uff.abscissa".to_string(),
         data_type_name(first.abscissa.data_type).to_string(),

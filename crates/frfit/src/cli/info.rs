@@ -11,7 +11,8 @@ use std::path::PathBuf;
 /// Arguments of `frfit info`.
 #[derive(ClapArgs, Debug)]
 pub struct Args {
-    /// FRF file (CSV as in FORMATS.md, or UFF 58 with extension .uff/.unv).
+    /// FRF file: CSV as in FORMATS.md (any spreadsheet dialect), UFF 58 (.uff/.unv,
+    /// ASCII or binary) or MATLAB (.mat with `G` and `freq_hz`).
     pub data: PathBuf,
     /// Print a JSON object instead of text.
     #[arg(long)]
@@ -71,6 +72,23 @@ fn summarise(d: &Frf) -> Summary {
     }
 }
 
+/// The file format and variant that was read, from the reader's metadata.
+fn format_read(d: &Frf) -> String {
+    let md = &d.metadata;
+    if let Some(dialect) = md.get("csv.dialect") {
+        format!("FRF CSV ({dialect})")
+    } else if let Some(enc) = md.get("uff.encoding") {
+        format!(
+            "UFF dataset 58, {enc}, {}",
+            md.get("uff.ordinate").map_or("", String::as_str)
+        )
+    } else if let (Some(g), Some(f)) = (md.get("mat.frf"), md.get("mat.freq")) {
+        format!("MATLAB .mat (level 5), `{g}` and `{f}`")
+    } else {
+        "unknown".into()
+    }
+}
+
 /// A relative level in dB (`20 log10`).
 fn fmt_db(r: f64) -> String {
     if r > 0.0 && r.is_finite() {
@@ -88,6 +106,7 @@ pub fn run(args: Args, _quiet: bool) -> Result<(), FrfitError> {
     if args.json {
         let v = json!({
             "file": path,
+            "format": format_read(&d),
             "ny": d.ny(),
             "nu": d.nu(),
             "n_lines": s.n_lines,
@@ -105,6 +124,7 @@ pub fn run(args: Args, _quiet: bool) -> Result<(), FrfitError> {
         return Ok(());
     }
     println!("file:         {path}");
+    println!("format:       {}", format_read(&d));
     println!(
         "dimensions:   {} output(s) x {} input(s) ({} entries)",
         d.ny(),

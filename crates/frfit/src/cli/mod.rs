@@ -6,6 +6,7 @@ use frfit::FrfitError;
 
 pub mod cmif;
 pub mod common;
+pub mod convert;
 pub mod diagnose;
 pub mod eval;
 pub mod fit;
@@ -35,6 +36,8 @@ pub struct Cli {
 pub enum Command {
     /// Summarise an FRF file: dimensions, band, lines, units, variance and noise level.
     Info(info::Args),
+    /// Convert an FRF file between FRF CSV, UFF 58 (ASCII or binary) and MATLAB .mat.
+    Convert(convert::Args),
     /// Complex mode indicator function: singular values per line and the picked modes.
     Cmif(cmif::Args),
     /// Simulate an experiment (the wafer stage) and estimate its FRF.
@@ -57,6 +60,7 @@ pub fn run(cli: Cli) -> Result<(), FrfitError> {
     let quiet = cli.quiet;
     match cli.command {
         Command::Info(a) => info::run(a, quiet),
+        Command::Convert(a) => convert::run(a, quiet),
         Command::Cmif(a) => cmif::run(a, quiet),
         Command::Simulate(a) => simulate::run(a, quiet),
         Command::Nonparametric(a) => nonparametric::run(a, quiet),
