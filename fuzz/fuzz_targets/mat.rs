@@ -10,7 +10,7 @@ static A: alloc_limit::Counting = alloc_limit::Counting;
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let limit = alloc_limit::BASE + 10 * 1032 * data.len();
     alloc_limit::check("mat", limit, || {
-        let _ = frf_data::matfile::MatFile::from_bytes(data, "fuzz.mat");
+        let _ = experiment::matfile::MatFile::from_bytes(data, "fuzz.mat");
         let _ = frf_data::io::parse_frf_mat(data, "fuzz.mat");
     });
 });

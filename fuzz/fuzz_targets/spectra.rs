@@ -10,6 +10,6 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let text = String::from_utf8_lossy(data);
     let limit = alloc_limit::BASE + 10 * text.len();
     alloc_limit::check("spectra", limit, || {
-        let _ = frf_data::nonparametric::spectra_csv::parse_spectra_csv(&text, "fuzz.csv");
+        let _ = experiment::nonparametric::spectra_csv::parse_spectra_csv(&text, "fuzz.csv");
     });
 });

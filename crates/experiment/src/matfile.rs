@@ -2,7 +2,7 @@
 //! files, as `FORMATS.md` describes them: numeric vectors and matrices among other
 //! variables (structs, cells, strings, MCOS objects such as `tf`) that are skipped.
 //!
-//! The parsing is done by [`crate::io::mat5`] (a reader of the level-5 subset written for
+//! The parsing is done by [`frf_data::io::mat5`] (a reader of the level-5 subset written for
 //! this project, which returns errors instead of panicking on damaged files): MCOS
 //! objects (for example the `tf` object in `fditools_motorbench_msA.mat`) and other
 //! non-numeric variables are listed as skipped, and doubles stored in a compact integer
@@ -66,11 +66,11 @@ impl MatFile {
     /// Parses the bytes of a `.mat` file; `name` is used in errors.
     pub fn from_bytes(bytes: &[u8], name: &str) -> Result<Self, FrfError> {
         // Our own level-5 reader: it returns an error, never panics, on any input.
-        let vars = crate::io::mat5::parse_mat5(bytes, name)?;
+        let vars = frf_data::io::mat5::parse_mat5(bytes, name)?;
         let mut arrays = BTreeMap::new();
         let mut skipped = Vec::new();
         for v in vars {
-            use crate::io::mat5::MatValue;
+            use frf_data::io::mat5::MatValue;
             if v.name.is_empty() {
                 // the subsystem data of MCOS objects: no user variable
                 continue;

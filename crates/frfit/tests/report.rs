@@ -188,6 +188,7 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
                 seconds: 0.34,
             },
         ],
+        chain: vec!["cmif".into(), "riv".into()],
     }
 }
 

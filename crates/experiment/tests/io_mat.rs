@@ -4,7 +4,7 @@
 
 use frf_data::io::mat5::{parse_mat5, MatValue};
 use frf_data::io::{frf_mat_bytes, parse_frf_mat, read_frf_csv};
-use frf_data::matfile::MatFile;
+use experiment::matfile::MatFile;
 use frf_data::shared_data::require;
 use frf_data::FrfDataset;
 
