@@ -2,9 +2,9 @@
 //! the reference files, FRF files (`G`, `freq_hz`) bit-exact, and a deterministic corpus
 //! of damaged files that must give errors, never panics.
 
+use experiment::matfile::MatFile;
 use frf_data::io::mat5::{parse_mat5, MatValue};
 use frf_data::io::{frf_mat_bytes, parse_frf_mat, read_frf_csv};
-use experiment::matfile::MatFile;
 use frf_data::shared_data::require;
 use frf_data::FrfDataset;
 

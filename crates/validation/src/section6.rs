@@ -16,8 +16,8 @@
 use crate::disturbance::DisturbanceModel;
 use crate::invalidation::{min_gamma, min_gamma_additive, GammaConfig, LineData, UncertaintyModel};
 use crate::ValidationError;
-use faer::Mat;
 use experiment::nonparametric::{Accumulator, EstimatorConfig, RealizationSpectra};
+use faer::Mat;
 use frf_data::C64;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -2,9 +2,9 @@
 //! `frfit fit`, the result).
 
 use super::{err, FitContext, PipelineConfig};
+use crate::chain::{run_chain, AdditiveOptions};
 use crate::FrfitError;
 use additive_riv::riv::iterate;
-use crate::chain::{run_chain, AdditiveOptions};
 use additive_riv::{fit_numerators, AdditiveModel, CmifInitReport, FitterReport, RivReport};
 use frf_data::{ChainSettings, Fit, LinkReport};
 
@@ -83,10 +83,14 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
             report.adapt = r.adapt;
         }
     }
-    let last = result.links.last().cloned().ok_or_else(|| FrfitError::Fit {
-        what: "chain".into(),
-        why: "no link ran".into(),
-    })?;
+    let last = result
+        .links
+        .last()
+        .cloned()
+        .ok_or_else(|| FrfitError::Fit {
+            what: "chain".into(),
+            why: "no link ran".into(),
+        })?;
     let mut messages: Vec<String> = result
         .links
         .iter()
@@ -99,7 +103,11 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
         cost_history: last.cost_history.clone(),
         iterations: result.links.iter().map(|l| l.iterations).sum(),
         convergence: last.convergence.clone(),
-        timings: result.links.iter().flat_map(|l| l.timings.clone()).collect(),
+        timings: result
+            .links
+            .iter()
+            .flat_map(|l| l.timings.clone())
+            .collect(),
         estimator: result
             .links
             .iter()
