@@ -264,7 +264,7 @@ pub fn run_chain(
             let c2 = cost(&model2);
             if c2 < c1 {
                 notes.push(format!(
-                    "the delay moved from {:.2} us (start) to {:.2} us in the refinement: the chain ran again from the start with it (cost {c1:.4e} -> {c2:.4e})",
+                    "the delay moved from {:.2} us (start) to {:.2} us in the refinement: fitted again from the start with it, the whole chain (cost {c1:.4e} -> {c2:.4e})",
                     start_delay * 1e6,
                     refined * 1e6
                 ));
