@@ -43,6 +43,11 @@ impl Default for AdditiveOptions {
     }
 }
 
+/// The constructor of a registered initialiser.
+pub type MakeInitializer = fn(&ChainSettings, &AdditiveOptions) -> Box<dyn Initializer>;
+/// The constructor of a registered refiner.
+pub type MakeRefiner = fn(&ChainSettings, &AdditiveOptions) -> Box<dyn Refiner>;
+
 /// A registered initialiser: name, description, constructor.
 pub struct InitEntry {
     /// The name on the command line.
@@ -50,7 +55,7 @@ pub struct InitEntry {
     /// What it does.
     pub description: &'static str,
     /// Builds the link.
-    pub make: fn(&ChainSettings, &AdditiveOptions) -> Box<dyn Initializer>,
+    pub make: MakeInitializer,
 }
 
 /// A registered refiner: name, description, constructor (`None` for `none`).
@@ -60,7 +65,7 @@ pub struct RefineEntry {
     /// What it does.
     pub description: &'static str,
     /// Builds the link; `None` hands the initialiser's model on as it is.
-    pub make: Option<fn(&ChainSettings, &AdditiveOptions) -> Box<dyn Refiner>>,
+    pub make: Option<MakeRefiner>,
 }
 
 fn make_cmif(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Initializer> {
