@@ -326,7 +326,7 @@ pub fn init_names(spec: &str) -> Result<Vec<String>, FrfitError> {
             return Err(FrfitError::argument(
                 "--init",
                 spec,
-                &format!("`{n}` is named twice"),
+                format!("`{n}` is named twice"),
             ));
         }
     }
