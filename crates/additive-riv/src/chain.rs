@@ -19,7 +19,7 @@ use frf_data::cmif::{cmif, pick_peaks, CmifPeak, PeakConfig};
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
 use frf_data::{
     ChainModel, DelayChoice, Estimator, Fit, FrfDataset, ModeSelection, ModelStructure,
-    ProgressSink, Weighting,
+    Precomputed, ProgressSink, Weighting,
 };
 use realize::{FrfModel, Hold};
 use serde::{Deserialize, Serialize};
@@ -51,6 +51,10 @@ pub struct CmifInitConfig {
     pub weighting: Weighting,
     /// Progress callback.
     pub progress: ProgressSink,
+    /// The data's delay estimate and CMIF when the caller already has them (used in
+    /// place of estimating the delay with `delay_config` and of computing the CMIF).
+    /// Default: none.
+    pub precomputed: Precomputed,
 }
 
 impl Default for CmifInitConfig {
@@ -67,6 +71,7 @@ impl Default for CmifInitConfig {
             zeta0: 0.01,
             weighting: Weighting::Auto,
             progress: ProgressSink::none(),
+            precomputed: Precomputed::default(),
         }
     }
 }
@@ -158,7 +163,10 @@ impl Estimator for CmifInit {
             DelayChoice::Start { seconds } => (seconds, true),
             DelayChoice::Auto => {
                 let t = Instant::now();
-                let est = estimate_delay(data, &cfg.delay_config)?;
+                let est = match &cfg.precomputed.delay {
+                    Some(d) => d.clone(),
+                    None => estimate_delay(data, &cfg.delay_config)?,
+                };
                 timings.push(("delay", t.elapsed()));
                 let tau = est.tau_s - self.hold_share();
                 report.delay_estimate = Some(est);
@@ -177,12 +185,19 @@ impl Estimator for CmifInit {
         let freqs: Vec<f64> = match &cfg.modes {
             ModeSelection::Frequencies(f) => f.clone(),
             sel => {
-                let c = cmif(data)?;
+                let computed;
+                let c = match cfg.precomputed.cmif_of(data) {
+                    Some(c) => c,
+                    None => {
+                        computed = cmif(data)?;
+                        &computed
+                    }
+                };
                 let mut pc = cfg.peaks.clone();
                 if let ModeSelection::Count(n) = sel {
                     pc.n_modes = Some(*n);
                 }
-                let peaks = pick_peaks(&c, &pc);
+                let peaks = pick_peaks(c, &pc);
                 let f = peaks.iter().map(|p| p.f_hz).collect();
                 report.cmif_peaks = peaks;
                 f

@@ -182,6 +182,7 @@ impl AdditiveFitter {
             zeta0: cfg.zeta0,
             weighting: cfg.riv.weighting.clone(),
             progress: cfg.progress.clone(),
+            precomputed: Default::default(),
         })
         .estimate(data, ())?;
         cfg.progress

@@ -14,7 +14,8 @@
 //!   `Start = ChainModel` becomes a link, with its report serialised into the
 //!   [`LinkReport`] that the model file and `summary.json` record.
 
-use crate::cmif::PeakConfig;
+use crate::cmif::{Cmif, PeakConfig};
+use crate::delay::DelayEstimate;
 use crate::{Convergence, Estimator, Fit, FrfDataset, ModelStructure, ProgressSink, Timing};
 use crate::{FrfError, Weighting};
 use realize::{FrfModel, Hold};
@@ -89,6 +90,33 @@ pub struct ChainSettings {
     pub order: Option<usize>,
     /// Progress callback.
     pub progress: ProgressSink,
+    /// Analyses of the data the caller already made (the pipeline makes them once per
+    /// band). Default: none.
+    pub precomputed: Precomputed,
+}
+
+/// Analyses of the chain's data made once by the caller and shared by every link, so
+/// that no link computes them again. They must be of the very data the chain runs on;
+/// a link checks what it cheaply can (the CMIF's frequency grid) and computes afresh
+/// when it does not match.
+#[derive(Debug, Clone, Default)]
+pub struct Precomputed {
+    /// The data's delay estimate ([`crate::delay::estimate_delay`] with the default
+    /// settings): used by initialisers when the delay is [`DelayChoice::Auto`].
+    pub delay: Option<DelayEstimate>,
+    /// The data's CMIF ([`crate::cmif::cmif`]): used by peak-picking initialisers.
+    pub cmif: Option<Arc<Cmif>>,
+}
+
+impl Precomputed {
+    /// The precomputed CMIF when it is of the grid of `data` (same lines, same
+    /// frequencies), `None` otherwise.
+    pub fn cmif_of<D: FrfDataset + ?Sized>(&self, data: &D) -> Option<&Cmif> {
+        self.cmif.as_deref().filter(|c| {
+            c.n_lines() == data.n_lines()
+                && (0..data.n_lines()).all(|k| c.freq_hz[k] == data.freq_hz(k))
+        })
+    }
 }
 
 /// The model a link hands on: the currency and, optionally, the link's own structure.

@@ -34,7 +34,7 @@ pub mod weighting;
 
 pub use chain::{
     ChainError, ChainModel, ChainOutput, ChainSettings, DelayChoice, InitLink, Initializer,
-    LinkReport, ModeSelection, RefineLink, Refiner,
+    LinkReport, ModeSelection, Precomputed, RefineLink, Refiner,
 };
 pub use dataset::FrfDataset;
 pub use error::{FormatProblem, FrfError};

@@ -87,6 +87,7 @@ fn make_cmif(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Initializer> {
             rigid_body: o.rigid_body,
             weighting: s.weighting.clone(),
             progress: s.progress.clone(),
+            precomputed: s.precomputed.clone(),
             ..Default::default()
         }),
     })

@@ -4,12 +4,13 @@
 
 use super::candidate::Proposal;
 use super::fitted::{FittedEffect, Refit};
+use crate::pipeline::chain_fit;
 use crate::pipeline::{err, FitContext, PipelineConfig};
 use crate::FrfitError;
 use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::significance::{chi2_upper, f_statistic, noise_scale};
 use additive_riv::structure::{local_energy, AdaptConfig, ResidualStats};
-use additive_riv::{fit_numerators, AdditiveFitter, AdditiveModel, DelayChoice, FitData};
+use additive_riv::{fit_numerators, AdditiveModel, DelayChoice, FitData};
 use frf_data::ModelStructure;
 
 /// One tested candidate: the refitted model and its F test against the current model.
@@ -178,8 +179,9 @@ pub fn joint_missed_modes(
 }
 
 /// A delay large enough to matter also misplaces the modes fitted without it: the fit
-/// from the start (CMIF, delay estimated from the data's phase slope and refined, mode
-/// adaptation), tested beside the incremental refit. `None` when it fails, does not
+/// from the start (the run's estimator chain, `--init`/`--refine`, with the delay
+/// estimated from the data's phase slope and refined), tested beside the incremental
+/// refit. `None` when it fails, does not
 /// lower the cost or ends without a fitted delay.
 pub fn restart_with_delay(
     ctx: &FitContext,
@@ -191,8 +193,8 @@ pub fn restart_with_delay(
         delay: DelayChoice::Auto,
         ..ctx.quiet_fitter_config(cfg)
     };
-    let (fit, rep) = AdditiveFitter::new(fc).fit(&ctx.band).ok()?;
-    let m = fit.model;
+    let first = chain_fit(ctx, cfg, &fc).ok()?;
+    let (m, rep) = (first.fit.model, first.report);
     let c = model_cost(&m, fd);
     let lowers_cost = c < current.cost;
     if !(lowers_cost && m.factor.fit_delay) {

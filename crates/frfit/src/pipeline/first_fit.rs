@@ -6,7 +6,7 @@ use crate::chain::{run_chain, AdditiveOptions};
 use crate::FrfitError;
 use additive_riv::riv::iterate;
 use additive_riv::{fit_numerators, AdditiveModel, CmifInitReport, FitterReport, RivReport};
-use frf_data::{ChainSettings, Fit, LinkReport};
+use frf_data::{ChainSettings, Fit, LinkReport, Precomputed};
 
 /// The first fit of a run and where it came from.
 pub struct FirstFit {
@@ -45,7 +45,19 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
             chain_runs: Vec::new(),
         });
     }
-    let fc = ctx.fitter_config(cfg);
+    chain_fit(ctx, cfg, &ctx.fitter_config(cfg))
+}
+
+/// The estimator chain `cfg.init -> cfg.refine` on the band of `ctx` with the fitter
+/// settings `fc` (hold, delay, modes, weighting, adaptation, progress), the band's delay
+/// estimate and CMIF taken from `ctx`. The model is the chain's own additive structure
+/// when its last link has one, otherwise the structure of the currency model with
+/// numerators by eq. (24). Used by [`first_fit`] and by the diagnosis's restart trial.
+pub fn chain_fit(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    fc: &additive_riv::FitterConfig,
+) -> Result<FirstFit, FrfitError> {
     let settings = ChainSettings {
         hold: fc.hold,
         delay: fc.delay,
@@ -55,6 +67,11 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
         peaks: fc.peaks.clone(),
         order: cfg.order,
         progress: fc.progress.clone(),
+        // the band's delay estimate and CMIF, made once in the context
+        precomputed: Precomputed {
+            delay: ctx.delay_estimate.clone(),
+            cmif: Some(std::sync::Arc::new(ctx.cmif.clone())),
+        },
     };
     let opts = AdditiveOptions {
         riv: fc.riv.clone(),

@@ -18,7 +18,7 @@ mod first_fit;
 mod summarize;
 
 pub use context::FitContext;
-pub use first_fit::{first_fit, FirstFit};
+pub use first_fit::{chain_fit, first_fit, FirstFit};
 pub(crate) use summarize::error_stats;
 pub use summarize::final_model_summary;
 
