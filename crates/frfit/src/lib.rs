@@ -9,6 +9,7 @@ pub mod chain;
 pub mod declared;
 pub mod diagnose;
 pub mod error;
+pub mod export;
 pub mod pipeline;
 pub mod plots;
 pub mod report;

@@ -9,6 +9,7 @@ pub mod common;
 pub mod convert;
 pub mod diagnose;
 pub mod eval;
+pub mod export;
 pub mod fit;
 pub mod info;
 pub mod model_opts;
@@ -48,6 +49,8 @@ pub enum Command {
     Fit(fit::Args),
     /// Evaluate a fitted model at a data file's frequencies; write the response as CSV.
     Eval(eval::Args),
+    /// Write a fitted model as a real state space (A, B, C, D) with its factors.
+    Export(export::Args),
     /// Fit, then trace the residual to effects the model lacks; write a report.
     Diagnose(diagnose::Args),
     /// Minimum additive uncertainty per line against an independent validation FRF
@@ -66,6 +69,7 @@ pub fn run(cli: Cli) -> Result<(), FrfitError> {
         Command::Nonparametric(a) => nonparametric::run(a, quiet),
         Command::Fit(a) => fit::run(a, quiet),
         Command::Eval(a) => eval::run(a, quiet),
+        Command::Export(a) => export::run(a, quiet),
         Command::Diagnose(a) => diagnose::run(a, quiet),
         Command::Validate(a) => validate::run(a, quiet),
     }

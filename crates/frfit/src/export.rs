@@ -1,0 +1,280 @@
+//! The fitted model as a real state space for controller design (`frfit export`).
+//!
+//! The rational part of the model currency ([`FrfModel`]) is realized in real modal
+//! block form ([`realize::ModalModel::to_state_space`]: rigid-body integrator chains
+//! first, one `2 x 2` block per retained singular value of each mode's residue, then the
+//! real poles), and the known factors are written beside it as what they are:
+//!
+//! `P(j w) = D(w) .* ( (j w)^k exp(-j w tau) H(w) + X )`
+//!
+//! with `H(w) = C (j w I - A)^-1 B + D` for a continuous model, or, when the model was
+//! fitted with the exact zero-order hold, `H(w) = Cd (z I - Ad)^-1 Bd + Dd` at
+//! `z = exp(j w Ts)` (the exact ZOH equivalent, Van Loan's block exponential), `tau`
+//! the delay beyond the hold, `k` the derivative order of the data (0 displacement,
+//! 1 velocity, 2 accelerance), `X` a crosstalk that bypasses the delay and `D(w)` the
+//! fitted actuator/sensor dynamics factors. MATLAB's `ss(A, B, C, D)` (with
+//! `'OutputDelay'` or `'InputDelay'` = `delay_s`) and python-control's `StateSpace` take
+//! the matrices as they are.
+//!
+//! A discrete equivalent is written on request for a continuous model too (`--discrete
+//! FS_HZ`: exact ZOH at that rate, the delay then also stated in samples). A Pade
+//! approximation of the delay is not written: the delay is given exactly.
+
+use crate::FrfitError;
+use frf_data::io::mat5::{mat5_bytes, MatWrite};
+use realize::{DynamicsFactor, FrfModel, Hold, StateSpace};
+use serde::{Deserialize, Serialize};
+
+/// Format name of the exported JSON.
+pub const FORMAT: &str = "frfit-state-space";
+/// Format version.
+pub const VERSION: u32 = 1;
+
+/// Real matrices `A, B, C, D`, row-major (`a[i][j]` is row `i`, column `j`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Matrices {
+    /// State matrix (`n x n`).
+    pub a: Vec<Vec<f64>>,
+    /// Input matrix (`n x nu`).
+    pub b: Vec<Vec<f64>>,
+    /// Output matrix (`ny x n`).
+    pub c: Vec<Vec<f64>>,
+    /// Feedthrough (`ny x nu`).
+    pub d: Vec<Vec<f64>>,
+}
+
+impl Matrices {
+    fn of(ss: &StateSpace) -> Self {
+        let rows = |m: &faer::Mat<f64>| -> Vec<Vec<f64>> {
+            (0..m.nrows())
+                .map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect())
+                .collect()
+        };
+        Self {
+            a: rows(&ss.a),
+            b: rows(&ss.b),
+            c: rows(&ss.c),
+            d: rows(&ss.d),
+        }
+    }
+}
+
+/// The exact zero-order-hold equivalent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Discrete {
+    /// Sample time, seconds.
+    pub ts_s: f64,
+    /// `Ad, Bd, Cd, Dd`.
+    pub matrices: Matrices,
+    /// Why it is here: the model's own hold (`"fitted with the exact zero-order hold"`)
+    /// or a request.
+    pub origin: String,
+    /// The delay beyond the hold in samples (`delay_s / ts_s`; not rounded).
+    pub delay_samples: f64,
+}
+
+/// The factors that multiply (or bypass) the rational part.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Factors {
+    /// `tau`, seconds (beyond the hold when the hold is exact ZOH).
+    pub delay_s: f64,
+    /// `k` of `(j w)^k`.
+    pub derivative_order: u32,
+    /// The hold the model was fitted with (`none`, `zoh:FS`, `sinc:FS`).
+    pub hold: String,
+    /// `X`, `ny x nu` row-major, when the model has a crosstalk that bypasses the delay.
+    pub crosstalk: Option<Vec<Vec<f64>>>,
+    /// `D(w)`: the fitted dynamics factors (`B(s/scale) / A(s/scale)`, see
+    /// [`DynamicsFactor`]).
+    pub dynamics: Vec<DynamicsFactor>,
+}
+
+/// The exported model (`frfit-state-space` version 1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StateSpaceExport {
+    /// [`FORMAT`].
+    pub format: String,
+    /// [`VERSION`].
+    pub version: u32,
+    /// Outputs.
+    pub ny: usize,
+    /// Inputs.
+    pub nu: usize,
+    /// States of the continuous realization.
+    pub n_states: usize,
+    /// The response formula the matrices and factors make (see the module documentation).
+    pub response: String,
+    /// The continuous-time realization of the rational part.
+    pub continuous: Matrices,
+    /// The exact ZOH equivalent (the model's hold, or `--discrete`).
+    pub discrete: Option<Discrete>,
+    /// The factors stated beside the matrices.
+    pub factors: Factors,
+    /// Units of the model (from the model file), when known.
+    pub units: Option<String>,
+    /// The relative rank tolerance of the residues (0: working precision).
+    pub rank_tol: f64,
+}
+
+/// The state space of `model` (see the module documentation); `discrete_fs_hz` asks for
+/// the exact ZOH equivalent at that rate when the model has no exact hold of its own.
+/// Each residue keeps the singular values above `rank_tol` times its largest (`0`: every
+/// direction above working precision, so that the realization reproduces the model
+/// exactly; a fitted rank-one mode then may take 4 states instead of 2).
+pub fn export_state_space(
+    model: &FrfModel,
+    discrete_fs_hz: Option<f64>,
+    rank_tol: f64,
+    units: Option<String>,
+) -> Result<StateSpaceExport, FrfitError> {
+    if !(rank_tol.is_finite() && (0.0..1.0).contains(&rank_tol)) {
+        return Err(FrfitError::argument(
+            "--rank-tol",
+            rank_tol,
+            "the relative rank tolerance must be in [0, 1)",
+        ));
+    }
+    let realize_err = |e: realize::RealizeError| FrfitError::Fit {
+        what: "state-space realization of the model".into(),
+        why: e.to_string(),
+    };
+    model.validate().map_err(realize_err)?;
+    let ss = model.modal.to_state_space(rank_tol).map_err(realize_err)?;
+    let f = &model.factors;
+    let (fs, origin) = match (f.hold, discrete_fs_hz) {
+        (Hold::Zoh { fs_hz }, _) => (
+            Some(fs_hz),
+            "the model was fitted with the exact zero-order hold: this is its rational part",
+        ),
+        (_, Some(fs_hz)) => {
+            if !(fs_hz.is_finite() && fs_hz > 0.0) {
+                return Err(FrfitError::argument(
+                    "--discrete",
+                    fs_hz,
+                    "the sample rate must be a positive number of Hz",
+                ));
+            }
+            (
+                Some(fs_hz),
+                "requested: the exact zero-order-hold equivalent of the continuous part",
+            )
+        }
+        _ => (None, ""),
+    };
+    let discrete = match fs {
+        Some(fs_hz) => {
+            let ts = 1.0 / fs_hz;
+            let d = ss.discretize_zoh(ts).map_err(realize_err)?;
+            Some(Discrete {
+                ts_s: ts,
+                matrices: Matrices::of(&d),
+                origin: origin.into(),
+                delay_samples: f.delay_s / ts,
+            })
+        }
+        None => None,
+    };
+    let h = if matches!(f.hold, Hold::Zoh { .. }) {
+        "Cd (z I - Ad)^-1 Bd + Dd at z = exp(j w Ts) (discrete)"
+    } else {
+        "C (j w I - A)^-1 B + D (continuous)"
+    };
+    let mut response = format!(
+        "P(j w) = (j w)^{} exp(-j w {:.6e}) [{h}]",
+        f.derivative_order, f.delay_s
+    );
+    if let Hold::Sinc { fs_hz } = f.hold {
+        response.push_str(&format!(" sinc(w / (2 {fs_hz}))"));
+    }
+    if f.crosstalk.is_some() {
+        response.push_str(" + X (crosstalk)");
+    }
+    if !f.dynamics.is_empty() {
+        response = format!("dynamics factors .* ({response})");
+    }
+    Ok(StateSpaceExport {
+        format: FORMAT.into(),
+        version: VERSION,
+        ny: model.ny(),
+        nu: model.nu(),
+        n_states: ss.n_states(),
+        response,
+        continuous: Matrices::of(&ss),
+        discrete,
+        factors: Factors {
+            delay_s: f.delay_s,
+            derivative_order: f.derivative_order,
+            hold: f.hold.name(),
+            crosstalk: f.crosstalk.as_ref().map(|x| {
+                (0..x.nrows())
+                    .map(|i| (0..x.ncols()).map(|j| x[(i, j)]).collect())
+                    .collect()
+            }),
+            dynamics: f.dynamics.clone(),
+        },
+        units,
+        rank_tol,
+    })
+}
+
+/// Column-major data and dimensions of a row-major matrix (`rows` x `cols`).
+fn column_major(m: &[Vec<f64>], rows: usize, cols: usize) -> (Vec<f64>, [usize; 2]) {
+    let mut v = Vec::with_capacity(rows * cols);
+    for j in 0..cols {
+        for row in m.iter().take(rows) {
+            v.push(row[j]);
+        }
+    }
+    (v, [rows, cols])
+}
+
+/// The export as a level-5 MAT-file: `A, B, C, D`, `delay_s`, `derivative_order`, and
+/// `Ad, Bd, Cd, Dd, Ts` when a discrete equivalent is present, `X` for a crosstalk
+/// (MATLAB: `load M.mat; sys = ss(A, B, C, D, 'OutputDelay', delay_s)`). The dynamics
+/// factors, when present, are only in the JSON export (the MAT-file says so in
+/// `n_dynamics_factors`).
+pub fn mat_bytes(e: &StateSpaceExport) -> Vec<u8> {
+    let (n, ny, nu) = (e.n_states, e.ny, e.nu);
+    let mut store: Vec<(String, Vec<f64>, [usize; 2])> = Vec::new();
+    let mut put = |name: &str, m: &Matrices| {
+        for (suffix, mat, r, c) in [
+            ("A", &m.a, n, n),
+            ("B", &m.b, n, nu),
+            ("C", &m.c, ny, n),
+            ("D", &m.d, ny, nu),
+        ] {
+            let (v, dims) = column_major(mat, r, c);
+            store.push((format!("{suffix}{name}"), v, dims));
+        }
+    };
+    put("", &e.continuous);
+    if let Some(d) = &e.discrete {
+        put("d", &d.matrices);
+        store.push(("Ts".into(), vec![d.ts_s], [1, 1]));
+    }
+    store.push(("delay_s".into(), vec![e.factors.delay_s], [1, 1]));
+    store.push((
+        "derivative_order".into(),
+        vec![f64::from(e.factors.derivative_order)],
+        [1, 1],
+    ));
+    if let Some(x) = &e.factors.crosstalk {
+        let (v, dims) = column_major(x, ny, nu);
+        store.push(("X".into(), v, dims));
+    }
+    store.push((
+        "n_dynamics_factors".into(),
+        vec![e.factors.dynamics.len() as f64],
+        [1, 1],
+    ));
+    let vars: Vec<MatWrite<'_>> = store
+        .iter()
+        .map(|(name, v, dims)| MatWrite {
+            name,
+            dims,
+            real: v,
+            imag: None,
+        })
+        .collect();
+    mat5_bytes(&vars)
+}
