@@ -328,7 +328,54 @@ impl ModelFile {
                 bypass_factor: s.bypass_factor,
             })?;
         }
+        self.check_summary(&m)?;
         Ok(m)
+    }
+
+    /// The derived fields (`modes`, `rigid_body`) must be those of the model the
+    /// `submodels` rebuild: a file edited by hand or damaged there would otherwise be read
+    /// as something other than what it shows. The error names the field.
+    fn check_summary(&self, m: &AdditiveModel) -> Result<(), RivError> {
+        let mm = m.to_modal_model()?;
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-300);
+        let mismatch = |field: String, shown: f64, rebuilt: f64| {
+            RivError::Structure(format!(
+                "{field} is {shown} but the submodels, from which the model is rebuilt exactly, give {rebuilt}: the file was edited or damaged (`modes` is a summary: edit `submodels` or fit again)"
+            ))
+        };
+        if self.modes.len() != mm.pairs.len() {
+            return Err(RivError::Structure(format!(
+                "modes lists {} modes but the submodels hold {}: the file was edited or damaged",
+                self.modes.len(),
+                mm.pairs.len()
+            )));
+        }
+        for (i, (shown, p)) in self.modes.iter().zip(&mm.pairs).enumerate() {
+            if !close(shown.f_hz, p.f_hz()) {
+                return Err(mismatch(format!("modes[{i}].f_hz"), shown.f_hz, p.f_hz()));
+            }
+            if !close(shown.zeta, p.zeta()) {
+                return Err(mismatch(format!("modes[{i}].zeta"), shown.zeta, p.zeta()));
+            }
+            let (re, im) = (&shown.residue.re, &shown.residue.im);
+            let shape_ok =
+                |r: &Vec<Vec<f64>>| r.len() == self.ny && r.iter().all(|row| row.len() == self.nu);
+            if !(shape_ok(re) && shape_ok(im)) {
+                return Err(RivError::Structure(format!(
+                    "modes[{i}].residue is not {}x{} (ny x nu of the file)",
+                    self.ny, self.nu
+                )));
+            }
+        }
+        let integrators = self.rigid_body.as_ref().map_or(0, |r| r.integrators);
+        if integrators != mm.rigid.len() {
+            return Err(mismatch(
+                "rigid_body.integrators".into(),
+                integrators as f64,
+                mm.rigid.len() as f64,
+            ));
+        }
+        Ok(())
     }
 
     /// Reads and checks a model file.
@@ -428,5 +475,47 @@ mod tests {
         f.version = VERSION;
         f.format = "x".into();
         assert!(f.to_model().is_err());
+    }
+
+    /// Valid JSON, wrong content in the derived fields: the error names the field.
+    #[test]
+    fn edited_summary_fields_are_named() {
+        let mut m = AdditiveModel::new(2, 2, Domain::Continuous).unwrap();
+        m.push_rigid_body(2, 30.0).unwrap();
+        m.push_mode(10.0, 0.1, false).unwrap();
+        m.push_mode(40.0, 0.02, false).unwrap();
+        for s in &mut m.submodels {
+            for b in &mut s.num {
+                for j in 0..2 {
+                    for i in 0..2 {
+                        b[(i, j)] = 1.0 + (i + 2 * j) as f64;
+                    }
+                }
+            }
+        }
+        let f = ModelFile::from_model(&m, None, None, Provenance::default()).unwrap();
+        f.to_model().expect("the file as written reads back");
+        let text = serde_json::to_string(&f).unwrap();
+        let edited = |edit: &dyn Fn(&mut serde_json::Value)| {
+            let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+            edit(&mut v);
+            let g: ModelFile = serde_json::from_value(v).unwrap();
+            g.to_model().unwrap_err().to_string()
+        };
+        let e = edited(&|v| v["modes"][1]["zeta"] = serde_json::json!(-0.02));
+        assert!(e.contains("modes[1].zeta is -0.02"), "{e}");
+        let e = edited(&|v| v["modes"][0]["f_hz"] = serde_json::json!(11.0));
+        assert!(e.contains("modes[0].f_hz is 11"), "{e}");
+        let e = edited(&|v| {
+            v["modes"].as_array_mut().unwrap().pop();
+        });
+        assert!(
+            e.contains("modes lists 1 modes but the submodels hold 2"),
+            "{e}"
+        );
+        let e = edited(&|v| v["modes"][0]["residue"]["re"] = serde_json::json!([[1.0, 2.0]]));
+        assert!(e.contains("modes[0].residue is not 2x2"), "{e}");
+        let e = edited(&|v| v["rigid_body"]["integrators"] = serde_json::json!(1));
+        assert!(e.contains("rigid_body.integrators"), "{e}");
     }
 }
