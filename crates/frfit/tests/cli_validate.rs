@@ -175,3 +175,50 @@ fn validate_reports_bad_input() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("missing.json"), "{}", stderr(&o));
 }
+
+/// `diagnose --validate`: the final model is validated on the given measurement, the
+/// result is in DIR/validation/ and summarised in report.md.
+#[test]
+fn diagnose_validates_its_final_model() {
+    let dir = temp_dir("diagnose-validate");
+    let csv = write_plant(&dir, 0.0);
+    let report = dir.join("report");
+    let o = run(&[
+        "diagnose",
+        csv.to_str().unwrap(),
+        "--delay",
+        "none",
+        "--report",
+        report.to_str().unwrap(),
+        "--validate",
+        csv.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v = read_json(&report.join("validation").join("validation.json"));
+    assert_eq!(v["lines"].as_array().unwrap().len(), 781);
+    assert_eq!(v["verdict"], "not_invalidated");
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(
+        md.contains("## Validation on an independent measurement")
+            && md.contains("not invalidated")
+            && md.contains("validation/gamma.svg"),
+        "{md}"
+    );
+    // a validation file of other dimensions is named
+    let other = dir.join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    let o = run(&[
+        "diagnose",
+        csv.to_str().unwrap(),
+        "--delay",
+        "none",
+        "--report",
+        dir.join("r2").to_str().unwrap(),
+        "--validate",
+        dir.join("missing.csv").to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("missing.csv"), "{}", stderr(&o));
+}

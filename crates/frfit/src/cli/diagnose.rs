@@ -5,6 +5,7 @@
 use super::common::load_data;
 use super::model_opts::{check_weighting, progress, FitOptions};
 use super::output::{print_fit, write_outputs};
+use super::validate;
 use clap::Args as ClapArgs;
 use frf_data::FrfDataset;
 use frfit::additive_riv::ModelFile;
@@ -30,6 +31,14 @@ pub struct Args {
     /// Write report.md, the SVG figures, model.json and summary.json into this directory.
     #[arg(long, value_name = "DIR")]
     pub report: PathBuf,
+    /// Validate the final model on an independent measurement of the same plant (FRF with
+    /// `_var` columns): the minimum additive uncertainty per line (as `frfit validate`),
+    /// written to DIR/validation/ and summarised in report.md.
+    #[arg(long, value_name = "VALIDATION.csv")]
+    pub validate: Option<PathBuf>,
+    /// Probability level of the validation's disturbance bound.
+    #[arg(long, default_value_t = 0.99, requires = "validate")]
+    pub alpha: f64,
 }
 
 /// Runs `frfit diagnose`.
@@ -85,6 +94,9 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         &args.data,
         "frfit diagnose",
     )?;
+    if let Some(vdata) = &args.validate {
+        validate_final_model(&args, vdata, &model_path, quiet)?;
+    }
     if !quiet {
         print_fit(&out);
         for s in &out.summary.steps {
@@ -106,6 +118,52 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         println!(
             "report written to {}",
             args.report.join("report.md").display()
+        );
+    }
+    Ok(())
+}
+
+/// `--validate`: the final model against the validation FRF (DIR/validation/), and a
+/// section of report.md with the verdict and gamma.
+fn validate_final_model(
+    args: &Args,
+    vdata: &std::path::Path,
+    model_path: &std::path::Path,
+    quiet: bool,
+) -> Result<(), FrfitError> {
+    let vargs = validate::Args {
+        model: model_path.to_path_buf(),
+        data: vdata.to_path_buf(),
+        alpha: args.alpha,
+        method: validate::Method::ClosedForm,
+        out: args.report.join("validation"),
+    };
+    let v = validate::validate_into(&vargs, true)?;
+    let md_path = args.report.join("report.md");
+    let mut md = std::fs::read_to_string(&md_path).map_err(|e| FrfitError::io(&md_path, e))?;
+    md.push_str(&format!(
+        "\n## Validation on an independent measurement\n\n\
+         The final model against `{}` (Oomen-Bosgra, minimum additive uncertainty per line, \
+         alpha = {}): **{}**; gamma max {:.4e}, median {:.4e}; {} of {} lines the \
+         disturbance alone does not explain (joint level). Details: \
+         [validation/report.md](validation/report.md).\n\n\
+         ![gamma against frequency](validation/gamma.svg)\n",
+        vdata.display(),
+        v.alpha,
+        validate::verdict_text(v.verdict),
+        v.gamma_max,
+        v.gamma_median,
+        v.lines_invalidated_at_zero,
+        v.lines.len()
+    ));
+    std::fs::write(&md_path, md).map_err(|e| FrfitError::io(&md_path, e))?;
+    if !quiet {
+        println!(
+            "validation on {}: {}, gamma max {:.3e}, median {:.3e}",
+            vdata.display(),
+            validate::verdict_text(v.verdict),
+            v.gamma_max,
+            v.gamma_median
         );
     }
     Ok(())

@@ -77,6 +77,13 @@ fn model_response(path: &Path, omega: &[f64]) -> Result<(ResponseGrid, String), 
 
 /// Runs `frfit validate`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
+    validate_into(&args, quiet).map(|_| ())
+}
+
+/// Validates `args.model` on `args.data`, writes `validation.json`, `gamma.svg` and
+/// `report.md` into `args.out`, and returns the result (`frfit validate`, and
+/// `frfit diagnose --validate` for its final model).
+pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitError> {
     let t0 = Instant::now();
     if !(args.alpha > 0.0 && args.alpha < 1.0) {
         return Err(FrfitError::argument(
@@ -122,7 +129,7 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     let svg_path = args.out.join("gamma.svg");
     gamma_plot(&v).write_svg(&svg_path, (900, 500))?;
     let md_path = args.out.join("report.md");
-    let md = report(&args, &desc, &v, data.units.as_deref());
+    let md = report(args, &desc, &v, data.units.as_deref());
     std::fs::write(&md_path, md).map_err(|e| FrfitError::io(&md_path, e))?;
     if !quiet {
         println!(
@@ -135,10 +142,10 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         );
         println!("written to {}", args.out.display());
     }
-    Ok(())
+    Ok(v)
 }
 
-fn verdict_text(v: Verdict) -> &'static str {
+pub fn verdict_text(v: Verdict) -> &'static str {
     match v {
         Verdict::NotInvalidated => "not invalidated",
         Verdict::InvalidatedAtZeroUncertainty => "invalidated at zero uncertainty",
