@@ -147,14 +147,21 @@ mod tests {
     #[test]
     fn pole_derivatives_match_finite_differences() {
         for ts in [None, Some(1e-4)] {
-            for p in [C64::new(-20.0, 600.0), C64::new(-1e-3, 0.0), C64::new(-5e3, 0.0)] {
+            for p in [
+                C64::new(-20.0, 600.0),
+                C64::new(-1e-3, 0.0),
+                C64::new(-5e3, 0.0),
+            ] {
                 let w = 640.0;
                 let (_, dh) = first_order(p, w, ts);
                 let d = 1e-6 * p.norm().max(1.0);
                 let (a, _) = first_order(p + d, w, ts);
                 let (b, _) = first_order(p - d, w, ts);
                 let fd = (a - b) / (2.0 * d);
-                assert!((fd - dh).norm() <= 1e-6 * dh.norm(), "{ts:?} {p}: {fd} vs {dh}");
+                assert!(
+                    (fd - dh).norm() <= 1e-6 * dh.norm(),
+                    "{ts:?} {p}: {fd} vs {dh}"
+                );
             }
         }
     }

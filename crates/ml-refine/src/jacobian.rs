@@ -144,7 +144,11 @@ pub fn currency_jacobian_into(model: &FrfModel, omega: f64, jac: &mut [C64]) {
         for j in 0..nu {
             for i in 0..ny {
                 let e = j * ny + i;
-                put(col, e, C64::new(0.0, -omega) * dprod(i, j, None) * fs * r[e]);
+                put(
+                    col,
+                    e,
+                    C64::new(0.0, -omega) * dprod(i, j, None) * fs * r[e],
+                );
             }
         }
         col += 1;

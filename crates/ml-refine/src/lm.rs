@@ -48,6 +48,8 @@ pub(crate) struct LmOutcome {
     pub convergence: Convergence,
     /// The `R` factor of `[J | r]` at `theta`, `(n + 1)^2` column-major.
     pub r: Vec<f64>,
+    /// The norms of the Jacobian's columns before the projection at `theta`.
+    pub vnorm: Vec<f64>,
 }
 
 /// One damped step: solves `[R; sqrt(lambda) D] d = [z; 0]` in the least-squares sense.
@@ -105,7 +107,7 @@ pub(crate) fn iterate(
     let mut conv = Convergence::MaxIterations {
         limit: s.max_iterations,
     };
-    let mut r = prob.jacobian_r(&theta, &ev);
+    let (mut r, mut vnorm) = prob.jacobian_r(&theta, &ev);
     if n == 0 {
         return LmOutcome {
             theta,
@@ -114,6 +116,7 @@ pub(crate) fn iterate(
             iterations: 0,
             convergence: Convergence::Direct,
             r,
+            vnorm,
         };
     }
     while it < s.max_iterations {
@@ -165,7 +168,7 @@ pub(crate) fn iterate(
         ev = e2;
         hist.push(ev.cost);
         lambda = (lambda / 5.0).max(1e-12);
-        r = prob.jacobian_r(&theta, &ev);
+        (r, vnorm) = prob.jacobian_r(&theta, &ev);
         progress.step(
             "ml",
             it,
@@ -193,17 +196,31 @@ pub(crate) fn iterate(
         iterations: it,
         convergence: conv,
         r,
+        vnorm,
     }
 }
 
 /// The unscaled covariance `(R^T R)^{-1}` of the nonlinear parameters (`R`: the first
-/// `n` columns of the merged factor), by an SVD of the column-scaled `R`, with the
-/// condition number of the scaled information matrix `R^T R` and the index of the
-/// parameter that dominates its weakest direction.
-pub(crate) fn covariance(r: &[f64], n: usize) -> Result<(Vec<f64>, f64, usize), Singular> {
+/// `n` columns of the merged factor), by an SVD of `R` with its columns scaled by
+/// `scale` (the norms of the Jacobian's columns before the projection, so that a
+/// parameter the linear terms can imitate shows as a small singular value), with the
+/// condition number of the scaled information matrix and the index of the parameter
+/// that dominates its weakest direction.
+pub(crate) fn covariance(
+    r: &[f64],
+    n: usize,
+    scale: &[f64],
+) -> Result<(Vec<f64>, f64, usize), Singular> {
     let nb = n + 1;
-    let dcol = column_norms(r, n);
-    let rs = faer::Mat::from_fn(n, n, |i, j| if i <= j { r[j * nb + i] / dcol[j] } else { 0.0 });
+    let dcol: Vec<f64> = scale
+        .iter()
+        .map(|&x| if x > 0.0 { x } else { 1.0 })
+        .collect();
+    let rs = faer::Mat::from_fn(
+        n,
+        n,
+        |i, j| if i <= j { r[j * nb + i] / dcol[j] } else { 0.0 },
+    );
     let svd = rs.thin_svd().map_err(|_| Singular {
         entry: usize::MAX,
         column: 0,
@@ -211,11 +228,11 @@ pub(crate) fn covariance(r: &[f64], n: usize) -> Result<(Vec<f64>, f64, usize), 
     })?;
     let sv: Vec<f64> = (0..n).map(|i| svd.S()[i]).collect();
     let smax = sv.iter().cloned().fold(0.0, f64::max);
-    let (imin, smin) = sv
-        .iter()
-        .cloned()
-        .enumerate()
-        .fold((0, f64::INFINITY), |a, (i, x)| if x < a.1 { (i, x) } else { a });
+    let (imin, smin) =
+        sv.iter().cloned().enumerate().fold(
+            (0, f64::INFINITY),
+            |a, (i, x)| if x < a.1 { (i, x) } else { a },
+        );
     let v = svd.V();
     let weakest = (0..n)
         .max_by(|&a, &b| v[(a, imin)].abs().total_cmp(&v[(b, imin)].abs()))

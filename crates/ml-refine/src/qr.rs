@@ -65,7 +65,10 @@ mod tests {
             for q in 0..cols {
                 let g: f64 = (0..rows).map(|i| a0[p * rows + i] * a0[q * rows + i]).sum();
                 let r: f64 = (0..cols).map(|i| a[p * rows + i] * a[q * rows + i]).sum();
-                assert!((g - r).abs() < 1e-12 * g.abs().max(1.0), "{p} {q}: {g} vs {r}");
+                assert!(
+                    (g - r).abs() < 1e-12 * g.abs().max(1.0),
+                    "{p} {q}: {g} vs {r}"
+                );
             }
         }
         // least squares through R: solve against the last column

@@ -259,20 +259,23 @@ impl Estimator for MlRefine {
         let const_num = match cfg.residues {
             ResidueForm::Complex => false,
             ResidueForm::ConstantNumerator => true,
-            ResidueForm::Auto => !model.modal.pairs.is_empty()
-                && model.modal.pairs.iter().all(|p| {
-                    let mut mx: f64 = 0.0;
-                    let mut re: f64 = 0.0;
-                    for j in 0..model.nu() {
-                        for i in 0..model.ny() {
-                            mx = mx.max(p.residue[(i, j)].norm());
-                            re = re.max(p.residue[(i, j)].re.abs());
+            ResidueForm::Auto => {
+                !model.modal.pairs.is_empty()
+                    && model.modal.pairs.iter().all(|p| {
+                        let mut mx: f64 = 0.0;
+                        let mut re: f64 = 0.0;
+                        for j in 0..model.nu() {
+                            for i in 0..model.ny() {
+                                mx = mx.max(p.residue[(i, j)].norm());
+                                re = re.max(p.residue[(i, j)].re.abs());
+                            }
                         }
-                    }
-                    re <= 1e-9 * mx
-                }),
+                        re <= 1e-9 * mx
+                    })
+            }
         };
-        let has_d = (0..model.ny()).any(|i| (0..model.nu()).any(|j| model.modal.feedthrough[(i, j)] != 0.0));
+        let has_d = (0..model.ny())
+            .any(|i| (0..model.nu()).any(|j| model.modal.feedthrough[(i, j)] != 0.0));
         let lay = Layout {
             ny: model.ny(),
             nu: model.nu(),
@@ -319,7 +322,13 @@ impl Estimator for MlRefine {
             theta.extend_from_slice(&d.den);
             theta.extend_from_slice(&d.num);
         }
-        let prob = Problem::new(lay.clone(), data.omegas(), data.values_vec(), sw, model.clone());
+        let prob = Problem::new(
+            lay.clone(),
+            data.omegas(),
+            data.values_vec(),
+            sw,
+            model.clone(),
+        );
         let eval0 = prob.evaluate(&theta).map_err(|s| MlError::Unidentifiable {
             what: format!(
                 "linear term {} of entry ({}, {}) at the start (it is a combination of the others to {:.1e})",
@@ -328,11 +337,12 @@ impl Estimator for MlRefine {
                 s.entry / lay.ny + 1,
                 s.ratio
             ),
-            condition: 1.0 / s.ratio.max(f64::MIN_POSITIVE),
+            condition: if s.ratio > 0.0 { 1.0 / s.ratio } else { f64::INFINITY },
             hint: "drop one of two coinciding poles, or a rigid-body or feedthrough term the band does not show".into(),
         })?;
         let np = lay.n_pairs;
-        let valid = |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0);
+        let valid =
+            |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0);
         let t_iter = Instant::now();
         let out = iterate(&prob, theta, eval0, &cfg.lm, valid, &cfg.progress);
         let iter_time = t_iter.elapsed();
@@ -374,7 +384,10 @@ impl Estimator for MlRefine {
                     let d2 = 2.0 * (r as f64 - 1.0);
                     let mu = d2 / (d2 - 2.0);
                     let var = d2.powi(3) / ((d2 - 2.0).powi(2) * (d2 - 4.0));
-                    (mu, Some(normal_upper_tail((ratio - mu) / (var / dof).sqrt())))
+                    (
+                        mu,
+                        Some(normal_upper_tail((ratio - mu) / (var / dof).sqrt())),
+                    )
                 }
                 _ => (1.0, Some(chi2_upper_tail(2.0 * cost, 2.0 * dof))),
             }
@@ -387,11 +400,12 @@ impl Estimator for MlRefine {
             (CovarianceScale::Auto, true) => ratio.max(1.0),
         };
         let n_nl = lay.n_nl();
-        let (cov, cond, weakest) = covariance(&out.r, n_nl).map_err(|_| MlError::Unidentifiable {
-            what: "the information matrix could not be factorised".into(),
-            condition: f64::INFINITY,
-            hint: "check the data for non-finite values".into(),
-        })?;
+        let (cov, cond, weakest) =
+            covariance(&out.r, n_nl, &out.vnorm).map_err(|_| MlError::Unidentifiable {
+                what: "the information matrix could not be factorised".into(),
+                condition: f64::INFINITY,
+                hint: "check the data for non-finite values".into(),
+            })?;
         if n_nl > 0 && !(cond <= cfg.max_condition) {
             return Err(MlError::Unidentifiable {
                 what: describe_param(&lay, &out.theta, weakest, &fitted),

@@ -141,7 +141,13 @@ pub(crate) struct Singular {
 }
 
 impl Problem {
-    pub fn new(lay: Layout, omega: Vec<f64>, g: Vec<C64>, sw: Vec<f64>, template: FrfModel) -> Self {
+    pub fn new(
+        lay: Layout,
+        omega: Vec<f64>,
+        g: Vec<C64>,
+        sw: Vec<f64>,
+        template: FrfModel,
+    ) -> Self {
         let ts = zoh_ts(&template);
         let mut rigid = Vec::with_capacity(omega.len() * lay.n_rigid);
         let mut rb = Vec::new();
@@ -300,7 +306,13 @@ impl Problem {
                 let mut a = vec![0.0; rows * cols];
                 self.fill_basis(&lines, e, &mut a, n_lin);
                 let norms: Vec<f64> = (0..n_lin)
-                    .map(|l| a[l * rows..(l + 1) * rows].iter().map(|x| x * x).sum::<f64>().sqrt())
+                    .map(|l| {
+                        a[l * rows..(l + 1) * rows]
+                            .iter()
+                            .map(|x| x * x)
+                            .sum::<f64>()
+                            .sqrt()
+                    })
                     .collect();
                 householder_r(&mut a, rows, cols);
                 for (l, &nl) in norms.iter().enumerate() {
@@ -331,16 +343,19 @@ impl Problem {
     }
 
     /// The `R` factor (`(n_nl + 1)^2`, column-major) of the projected Jacobian and
-    /// residual `[J | r]` of all entries at `theta`, whose linear parameters `ev` holds.
-    pub fn jacobian_r(&self, theta: &[f64], ev: &Eval) -> Vec<f64> {
+    /// residual `[J | r]` of all entries at `theta`, whose linear parameters `ev` holds,
+    /// and the norms of the Jacobian's columns before the projection (a column that the
+    /// projection almost cancels belongs to a parameter the linear terms can imitate).
+    pub fn jacobian_r(&self, theta: &[f64], ev: &Eval) -> (Vec<f64>, Vec<f64>) {
         let lines = self.lines(theta);
         let lay = &self.lay;
-        let (n, m, n_lin, n_lc, n_nl) = (self.n_lines(), lay.m(), lay.n_lin(), lay.n_lc(), lay.n_nl());
+        let (n, m, n_lin, n_lc, n_nl) =
+            (self.n_lines(), lay.m(), lay.n_lin(), lay.n_lc(), lay.n_nl());
         let (np, cpp) = (lay.n_pairs, lay.cpp());
         let rows = 2 * n;
         let nb = n_nl + 1;
         let f = self.factors(theta);
-        let blocks: Vec<Vec<f64>> = (0..m)
+        let blocks: Vec<(Vec<f64>, Vec<f64>)> = (0..m)
             .into_par_iter()
             .map(|e| {
                 let cols = n_lin + n_nl + 1;
@@ -400,6 +415,14 @@ impl Problem {
                         }
                     }
                 }
+                let vn: Vec<f64> = (0..n_nl)
+                    .map(|c| {
+                        a[(n_lin + c) * rows..(n_lin + c + 1) * rows]
+                            .iter()
+                            .map(|x| x * x)
+                            .sum()
+                    })
+                    .collect();
                 householder_r(&mut a, rows, cols);
                 // the lower-right block: R of the projected [J | r]
                 let mut b = vec![0.0; nb * nb];
@@ -408,13 +431,17 @@ impl Problem {
                         b[cj * nb + ri] = a[(n_lin + cj) * rows + n_lin + ri];
                     }
                 }
-                b
+                (b, vn)
             })
             .collect();
+        let mut vnorm = vec![0.0; n_nl];
         // merge: stack the blocks and factorise once more
         let srows = m * nb;
         let mut s = vec![0.0; srows * nb];
-        for (e, b) in blocks.iter().enumerate() {
+        for (e, (b, vn)) in blocks.iter().enumerate() {
+            for (acc, v) in vnorm.iter_mut().zip(vn) {
+                *acc += v;
+            }
             for cj in 0..nb {
                 for ri in 0..nb {
                     s[cj * srows + e * nb + ri] = b[cj * nb + ri];
@@ -428,13 +455,14 @@ impl Problem {
                 r[cj * nb + ri] = s[cj * srows + ri];
             }
         }
-        r
+        (r, vnorm.into_iter().map(f64::sqrt).collect())
     }
 
     /// The model at `theta` with the linear parameters `coef`.
     pub fn model(&self, theta: &[f64], coef: &[f64]) -> FrfModel {
         let lay = &self.lay;
-        let (ny, nu, m, n_lin, n_lc, cpp) = (lay.ny, lay.nu, lay.m(), lay.n_lin(), lay.n_lc(), lay.cpp());
+        let (ny, nu, m, n_lin, n_lc, cpp) =
+            (lay.ny, lay.nu, lay.m(), lay.n_lin(), lay.n_lc(), lay.cpp());
         let mut fm = self.template.clone();
         fm.factors = self.factors(theta);
         let cf = |e: usize, l: usize| coef[e * n_lin + l];
@@ -474,5 +502,142 @@ impl Problem {
         }
         debug_assert_eq!(m * n_lin, coef.len());
         fm
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realize::ModalModel;
+
+    /// The scaled residual vector at `theta` (linear parameters eliminated).
+    fn residual(p: &Problem, theta: &[f64]) -> Vec<f64> {
+        let ev = p.evaluate(theta).unwrap();
+        let fm = p.model(theta, &ev.coef);
+        let g = fm.freq_response(&p.omega).unwrap();
+        let m = p.lay.m();
+        let mut r = Vec::new();
+        for e in 0..m {
+            for k in 0..p.omega.len() {
+                let v = (p.g[k * m + e] - g.values[k * m + e]) * p.sw[k * m + e];
+                r.push(v.re);
+                r.push(v.im);
+            }
+        }
+        r
+    }
+
+    #[test]
+    fn projected_jacobian_matches_finite_differences_at_zero_residual() {
+        for (const_num, delay, ts, small) in [
+            (false, true, None, true),
+            (false, true, None, false),
+            (true, true, None, false),
+            (false, false, Some(2.5e-4), false),
+            (true, true, Some(2.5e-4), false),
+        ] {
+            let ny = if small { 1 } else { 2 };
+            let mut mm = ModalModel::new(ny, 1);
+            mm.pairs.push(PolePair::from_f_zeta(
+                120.0,
+                0.02,
+                faer::Mat::from_fn(ny, 1, |i, _| {
+                    C64::new(if const_num { 0.0 } else { 0.3 }, -1.0 - i as f64)
+                }),
+            ));
+            if !small {
+                mm.pairs.push(PolePair::from_f_zeta(
+                    410.0,
+                    0.01,
+                    faer::Mat::from_fn(ny, 1, |i, _| {
+                        C64::new(if const_num { 0.0 } else { -0.1 }, 2.0 + i as f64)
+                    }),
+                ));
+                mm.real_poles.push(RealPole {
+                    pole: -900.0,
+                    residue: faer::Mat::from_fn(ny, 1, |i, _| 50.0 + i as f64),
+                });
+            }
+            let mut fm = FrfModel::new(mm);
+            fm.factors.delay_s = 1.5e-4;
+            fm.factors.delay_fitted = delay;
+            if let Some(t) = ts {
+                fm.factors.hold = realize::Hold::Zoh { fs_hz: 1.0 / t };
+            }
+            let omega: Vec<f64> = (1..200)
+                .map(|k| 2.0 * std::f64::consts::PI * 5.0 * k as f64)
+                .collect();
+            let g = fm.freq_response(&omega).unwrap().values;
+            let lay = Layout {
+                ny,
+                nu: 1,
+                n_pairs: if small { 1 } else { 2 },
+                n_real: if small { 0 } else { 1 },
+                n_rigid: 0,
+                feedthrough: false,
+                crosstalk: false,
+                delay,
+                dynamics: vec![],
+                const_num,
+            };
+            let sw: Vec<f64> = g.iter().map(|v| 2f64.sqrt() / v.norm()).collect();
+            let p = Problem::new(lay.clone(), omega, g, sw, fm.clone());
+            let mut theta = vec![fm.modal.pairs[0].pole.re, fm.modal.pairs[0].pole.im];
+            if !small {
+                theta.extend([fm.modal.pairs[1].pole.re, fm.modal.pairs[1].pole.im, -900.0]);
+            }
+            if delay {
+                theta.push(1.5e-4);
+            }
+            let n = theta.len();
+            if delay {
+                // one Gauss-Newton step from a delay 1e-8 s off returns to the truth
+                let mut t1 = theta.clone();
+                t1[n - 1] += 1e-8;
+                let ev1 = p.evaluate(&t1).unwrap();
+                let (r1, _) = p.jacobian_r(&t1, &ev1);
+                let mut z: Vec<f64> = (0..n).map(|i| r1[n * (n + 1) + i]).collect();
+                crate::qr::back_substitute(&r1, n + 1, 0, n, &mut z);
+                let err = t1[n - 1] + z[n - 1] - theta[n - 1];
+                assert!(
+                    err.abs() < 1e-12,
+                    "{const_num} {ts:?}: GN step {:.3e}, left {err:.3e}",
+                    z[n - 1]
+                );
+            }
+            let ev = p.evaluate(&theta).unwrap();
+            assert!(ev.cost < 1e-20, "{}", ev.cost);
+            let (r, _) = p.jacobian_r(&theta, &ev);
+            let mut cols = Vec::new();
+            for i in 0..n {
+                let h = 1e-6 * theta[i].abs();
+                let mut tp = theta.clone();
+                tp[i] += h;
+                let mut tm = theta.clone();
+                tm[i] -= h;
+                let (a, b) = (residual(&p, &tp), residual(&p, &tm));
+                cols.push(
+                    a.iter()
+                        .zip(&b)
+                        .map(|(x, y)| -(x - y) / (2.0 * h))
+                        .collect::<Vec<f64>>(),
+                );
+            }
+            for a in 0..n {
+                for b in 0..n {
+                    let fd: f64 = cols[a].iter().zip(&cols[b]).map(|(x, y)| x * y).sum();
+                    let an: f64 = (0..n)
+                        .map(|i| r[a * (n + 1) + i] * r[b * (n + 1) + i])
+                        .sum();
+                    let scale = (cols[a].iter().map(|x| x * x).sum::<f64>()
+                        * cols[b].iter().map(|x| x * x).sum::<f64>())
+                    .sqrt();
+                    assert!(
+                        (fd - an).abs() <= 1e-6 * scale,
+                        "{const_num} {delay} {ts:?} ({a},{b}): fd {fd:.6e} vs R^T R {an:.6e}"
+                    );
+                }
+            }
+        }
     }
 }
