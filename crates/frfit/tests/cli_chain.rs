@@ -18,7 +18,6 @@ fn unknown_and_planned_methods_name_the_choices() {
         ("--init", "bogus", "unknown method; available: cmif"),
         ("--init", "subspace", "not implemented in this version"),
         ("--refine", "bogus", "available: riv, none"),
-        ("--refine", "ml", "not implemented in this version"),
     ] {
         let o = run(&[
             "fit",

@@ -1,11 +1,51 @@
 //! A Householder QR of a tall column-major matrix, in place, sequential: the per-entry
 //! factorisations of the variable-projection solver run on the rayon pool, one matrix
-//! per task, so the factorisation itself stays single-threaded.
+//! per task, so the factorisation itself stays single-threaded (faer's blocked QR with
+//! `Par::Seq`).
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::qr::no_pivoting::factor::{
+    qr_in_place, qr_in_place_scratch, recommended_block_size,
+};
+use faer::{Mat, MatMut, Par};
 
 /// Householder QR of the column-major `rows x cols` matrix `a` in place: on return the
 /// upper triangle of its first `min(rows, cols)` rows holds `R` (the reflectors are
 /// discarded). Row `i` of `R` is `a[c * rows + i]` for `c >= i`.
 pub(crate) fn householder_r(a: &mut [f64], rows: usize, cols: usize) {
+    debug_assert_eq!(a.len(), rows * cols);
+    let k = rows.min(cols);
+    if k == 0 {
+        return;
+    }
+    let bs = recommended_block_size::<f64>(rows, cols);
+    let mut q = Mat::<f64>::zeros(bs, k);
+    let mut buf = MemBuffer::new(qr_in_place_scratch::<f64>(
+        rows,
+        cols,
+        bs,
+        Par::Seq,
+        Default::default(),
+    ));
+    qr_in_place(
+        MatMut::from_column_major_slice_mut(a, rows, cols),
+        q.as_mut(),
+        Par::Seq,
+        MemStack::new(&mut buf),
+        Default::default(),
+    );
+    // the reflectors below the diagonal are not needed
+    for j in 0..k {
+        for x in a[j * rows + j + 1..(j + 1) * rows].iter_mut() {
+            *x = 0.0;
+        }
+    }
+}
+
+/// The unblocked Householder QR [`householder_r`] replaced (kept for the test that
+/// compares the two).
+#[cfg(test)]
+fn householder_r_unblocked(a: &mut [f64], rows: usize, cols: usize) {
     debug_assert_eq!(a.len(), rows * cols);
     for j in 0..rows.min(cols) {
         let (head, tail) = a.split_at_mut((j + 1) * rows);
@@ -61,6 +101,14 @@ mod tests {
             .collect();
         let mut a = a0.clone();
         householder_r(&mut a, rows, cols);
+        let mut b = a0.clone();
+        householder_r_unblocked(&mut b, rows, cols);
+        for j in 0..cols {
+            for i in 0..=j.min(rows - 1) {
+                let (x, y) = (a[j * rows + i].abs(), b[j * rows + i].abs());
+                assert!((x - y).abs() < 1e-12 * x.max(1.0), "|R| ({i},{j}): {x} vs {y}");
+            }
+        }
         for p in 0..cols {
             for q in 0..cols {
                 let g: f64 = (0..rows).map(|i| a0[p * rows + i] * a0[q * rows + i]).sum();

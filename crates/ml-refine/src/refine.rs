@@ -67,6 +67,13 @@ pub struct MlConfig {
     /// Largest condition number of the column-scaled information matrix before a
     /// parameter is called not identifiable. Default: 1e13.
     pub max_condition: f64,
+    /// Modes the refinement may add where the residual shows a resonance the start
+    /// missed (only with a measured variance, while the cost test rejects the model at
+    /// 1e-3). Default: 4; 0 keeps the start's structure.
+    pub add_modes: usize,
+    /// Smallest F statistic (cost explained per added parameter over the noise scale)
+    /// for an added mode to be kept. Default: 25.
+    pub min_f: f64,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -82,6 +89,8 @@ impl Default for MlConfig {
             lm: LmSettings::default(),
             zeta_unstable: 0.01,
             max_condition: 1e13,
+            add_modes: 4,
+            min_f: 25.0,
             progress: ProgressSink::none(),
         }
     }
@@ -146,6 +155,9 @@ pub struct MlReport {
     pub delay_s: Option<f64>,
     /// Its standard deviation, seconds.
     pub delay_s_std: Option<f64>,
+    /// Start frequencies (Hz) of the modes the refinement added.
+    #[serde(default)]
+    pub added_modes_hz: Vec<f64>,
 }
 
 /// The maximum-likelihood refiner (Gauss-Newton / Levenberg-Marquardt with variable
@@ -198,6 +210,40 @@ fn describe_param(lay: &Layout, theta: &[f64], idx: usize, model: &FrfModel) -> 
         idx -= n;
     }
     "a parameter".into()
+}
+
+/// `E{V / N_dof}` with a variance from `realizations` realizations (`(R-1)/(R-2)`), 1
+/// when it is taken as exact.
+fn expected_ratio(realizations: Option<usize>) -> f64 {
+    match realizations {
+        Some(r) if r >= 4 => (r as f64 - 1.0) / (r as f64 - 2.0),
+        _ => 1.0,
+    }
+}
+
+/// The frequency (Hz) of the largest peak of the weighted residual energy
+/// `sum_e w |G - P|^2` per line (smoothed over 5 lines), away (more than two lines)
+/// from the model's modes; `None` when there is none.
+fn residual_peak(prob: &Problem, theta: &[f64], coef: &[f64], w: &[f64]) -> Option<f64> {
+    let fm = prob.model(theta, coef);
+    let resp = fm.freq_response(&prob.omega).ok()?;
+    let (n, m) = (prob.omega.len(), prob.lay.m());
+    let s: Vec<f64> = (0..n)
+        .map(|k| {
+            (0..m)
+                .map(|e| w[k * m + e] * (prob.g[k * m + e] - resp.values[k * m + e]).norm_sqr())
+                .sum()
+        })
+        .collect();
+    let smooth: Vec<f64> = (0..n)
+        .map(|k| s[k.saturating_sub(2)..(k + 3).min(n)].iter().sum())
+        .collect();
+    let dw = (prob.omega[n - 1] - prob.omega[0]) / (n.max(2) - 1) as f64;
+    let near = |wk: f64| fm.modal.pairs.iter().any(|p| (p.omega_n() - wk).abs() <= 2.0 * dw);
+    (0..n)
+        .filter(|&k| !near(prob.omega[k]))
+        .max_by(|&a, &b| smooth[a].total_cmp(&smooth[b]))
+        .map(|k| prob.omega[k] / TAU)
 }
 
 impl Estimator for MlRefine {
@@ -340,11 +386,70 @@ impl Estimator for MlRefine {
             condition: if s.ratio > 0.0 { 1.0 / s.ratio } else { f64::INFINITY },
             hint: "drop one of two coinciding poles, or a rigid-body or feedthrough term the band does not show".into(),
         })?;
-        let np = lay.n_pairs;
-        let valid =
-            |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0);
+        let valid = |np: usize| {
+            move |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0)
+        };
         let t_iter = Instant::now();
-        let out = iterate(&prob, theta, eval0, &cfg.lm, valid, &cfg.progress);
+        let mut out = iterate(&prob, theta, eval0, &cfg.lm, valid(lay.n_pairs), &cfg.progress);
+        let mut prob = prob;
+        let mut lay = lay;
+        let mut n_params = n_params;
+        let mut added = Vec::new();
+        // structure adaptation: a mode the start missed leaves a resonance in the residual
+        // that the cost test rejects; add a mode at its peak and keep it when it explains
+        // more than noise (F test, floor `min_f`)
+        while measured && added.len() < cfg.add_modes && out.convergence.is_converged() {
+            let dof = (n * m) as f64 - n_params as f64 / 2.0;
+            let p = chi2_upper_tail(2.0 * out.eval.cost, 2.0 * dof);
+            // a variance from R realizations alone raises the ratio to (R-1)/(R-2)
+            // (2 for R = 3): only a ratio beyond twice the expected one calls for a mode
+            let expected = expected_ratio(cfg.realizations);
+            if p >= 1e-3 || out.eval.cost / dof <= 2.0 * expected {
+                break;
+            }
+            let Some(f_new) = residual_peak(&prob, &out.theta, &out.eval.coef, &w) else {
+                break;
+            };
+            let mut lay2 = lay.clone();
+            lay2.n_pairs += 1;
+            let np = lay.n_pairs;
+            let wn = TAU * f_new;
+            let z0 = 0.01;
+            let mut theta2 = out.theta[..2 * np].to_vec();
+            theta2.extend([-z0 * wn, wn * (1.0 - z0 * z0).sqrt()]);
+            theta2.extend_from_slice(&out.theta[2 * np..]);
+            let prob2 = Problem::new(
+                lay2.clone(),
+                prob.omega.clone(),
+                prob.g.clone(),
+                prob.sw.clone(),
+                model.clone(),
+            );
+            let Ok(ev2) = prob2.evaluate(&theta2) else {
+                break;
+            };
+            let out2 = iterate(&prob2, theta2, ev2, &cfg.lm, valid(lay2.n_pairs), &cfg.progress);
+            let n_params2 = lay2.n_nl() + m * lay2.n_lin();
+            let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
+            let f_stat = ((out.eval.cost - out2.eval.cost) / ((n_params2 - n_params) as f64 / 2.0))
+                / (out2.eval.cost / dof2);
+            if !(f_stat > cfg.min_f) || !out2.convergence.is_converged() {
+                messages.push(format!(
+                    "a mode added at {f_new:.2} Hz (the residual's peak) did not explain more than noise (F = {f_stat:.1}): not kept"
+                ));
+                break;
+            }
+            messages.push(format!(
+                "mode added at {f_new:.2} Hz (the residual's peak; the start missed it): cost {:.4e} -> {:.4e}, F = {f_stat:.1}",
+                out.eval.cost, out2.eval.cost
+            ));
+            added.push(f_new);
+            prob = prob2;
+            lay = lay2;
+            n_params = n_params2;
+            out = out2;
+        }
+        let np = lay.n_pairs;
         let iter_time = t_iter.elapsed();
         let fitted = prob.model(&out.theta, &out.eval.coef);
         // unstable optimum
@@ -488,6 +593,7 @@ impl Estimator for MlRefine {
             modes,
             delay_s,
             delay_s_std,
+            added_modes_hz: added,
         };
         let mut fit = Fit {
             model: fitted,

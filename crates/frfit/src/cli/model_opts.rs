@@ -132,8 +132,9 @@ pub struct FitOptions {
     /// Initialiser of the estimator chain: `cmif` (CMIF peaks + convex numerators).
     #[arg(long, default_value = "cmif", value_name = "NAME")]
     pub init: String,
-    /// Refiner of the estimator chain: `riv` (refined IV with mode adaptation) or `none`
-    /// (the initialiser's model as it is).
+    /// Refiner of the estimator chain: `riv` (refined IV with mode adaptation), `ml`
+    /// (maximum likelihood with the standard deviations of the modes) or `none` (the
+    /// initialiser's model as it is).
     #[arg(long, default_value = "riv", value_name = "NAME")]
     pub refine: String,
     /// Weighting of the criterion.
