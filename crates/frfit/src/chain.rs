@@ -32,6 +32,9 @@ pub struct AdditiveOptions {
     pub adapt: Option<AdaptConfig>,
     /// Rigid-body choice of the CMIF initialiser.
     pub rigid_body: RigidBody,
+    /// Realizations the data's variance was estimated from, when declared (the ML
+    /// refiner's cost test expects `V / N_dof = (R - 1) / (R - 2)` then).
+    pub realizations: Option<usize>,
 }
 
 impl Default for AdditiveOptions {
@@ -40,6 +43,7 @@ impl Default for AdditiveOptions {
             riv: RivConfig::default(),
             adapt: Some(AdaptConfig::default()),
             rigid_body: RigidBody::Auto,
+            realizations: None,
         }
     }
 }
@@ -100,11 +104,12 @@ fn make_riv(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
     })
 }
 
-fn make_ml(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Refiner> {
+fn make_ml(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
     Box::new(RefineLink {
         name: "ml".into(),
         estimator: MlRefine::new(MlConfig {
             weighting: s.weighting.clone(),
+            realizations: o.realizations,
             progress: s.progress.clone(),
             ..Default::default()
         }),

@@ -1188,7 +1188,10 @@ fn markdown(
     } else {
         match &s.uncertainty {
             Some(u) => {
-                let _ = writeln!(md, "| mode | f [Hz] | +- 2 sigma [Hz] | zeta | +- 2 sigma |");
+                let _ = writeln!(
+                    md,
+                    "| mode | f [Hz] | +- 2 sigma [Hz] | zeta | +- 2 sigma |"
+                );
                 let _ = writeln!(md, "|---:|---:|---:|---:|---:|");
                 for (k, mo) in f.modes.iter().enumerate() {
                     let (sf, sz) = u

@@ -30,7 +30,12 @@ fn wafer_nominal_cmif_then_ml() {
         ..Default::default()
     };
     let t = Instant::now();
-    let r = run_chain(&band, "cmif", "ml", &settings, &AdditiveOptions::default()).unwrap();
+    // the file's comments declare 10 realizations, as `frfit fit` reads them
+    let opts = AdditiveOptions {
+        realizations: Some(10),
+        ..Default::default()
+    };
+    let r = run_chain(&band, "cmif", "ml", &settings, &opts).unwrap();
     let secs = t.elapsed().as_secs_f64();
     let w = clean.omegas();
     let g = realize::ResponseGrid {
@@ -80,4 +85,10 @@ fn wafer_nominal_cmif_then_ml() {
         assert!(m.zeta_std.is_finite() && m.zeta_std > 0.0, "{m:?}");
     }
     assert!(median <= 6e-6, "median {median:.3e}");
+    // at the noise level of a 10-realization variance: E{V/N_dof} = 9/8
+    assert!(
+        (rep.cost_ratio / rep.expected_ratio - 1.0).abs() < 0.02,
+        "{}",
+        rep.cost_ratio
+    );
 }

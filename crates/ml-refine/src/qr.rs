@@ -106,7 +106,10 @@ mod tests {
         for j in 0..cols {
             for i in 0..=j.min(rows - 1) {
                 let (x, y) = (a[j * rows + i].abs(), b[j * rows + i].abs());
-                assert!((x - y).abs() < 1e-12 * x.max(1.0), "|R| ({i},{j}): {x} vs {y}");
+                assert!(
+                    (x - y).abs() < 1e-12 * x.max(1.0),
+                    "|R| ({i},{j}): {x} vs {y}"
+                );
             }
         }
         for p in 0..cols {

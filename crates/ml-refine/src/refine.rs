@@ -182,7 +182,7 @@ fn describe_param(lay: &Layout, theta: &[f64], idx: usize, model: &FrfModel) -> 
         let p = C64::new(theta[2 * q], theta[2 * q + 1]);
         return format!(
             "the {} of the mode at {:.3} Hz (damping {:.2e})",
-            if idx % 2 == 0 {
+            if idx.is_multiple_of(2) {
                 "real part (damping)"
             } else {
                 "imaginary part (frequency)"
@@ -239,7 +239,12 @@ fn residual_peak(prob: &Problem, theta: &[f64], coef: &[f64], w: &[f64]) -> Opti
         .map(|k| s[k.saturating_sub(2)..(k + 3).min(n)].iter().sum())
         .collect();
     let dw = (prob.omega[n - 1] - prob.omega[0]) / (n.max(2) - 1) as f64;
-    let near = |wk: f64| fm.modal.pairs.iter().any(|p| (p.omega_n() - wk).abs() <= 2.0 * dw);
+    let near = |wk: f64| {
+        fm.modal
+            .pairs
+            .iter()
+            .any(|p| (p.omega_n() - wk).abs() <= 2.0 * dw)
+    };
     (0..n)
         .filter(|&k| !near(prob.omega[k]))
         .max_by(|&a, &b| smooth[a].total_cmp(&smooth[b]))
@@ -271,7 +276,7 @@ impl Estimator for MlRefine {
         let mut messages = Vec::new();
         // the start: stable poles, pairs above the real axis
         for p in &mut model.modal.pairs {
-            if !(p.pole.im > 0.0) {
+            if p.pole.im.is_nan() || p.pole.im <= 0.0 {
                 return Err(MlError::invalid(
                     "start pole pair",
                     p.pole,
@@ -390,7 +395,14 @@ impl Estimator for MlRefine {
             move |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0)
         };
         let t_iter = Instant::now();
-        let mut out = iterate(&prob, theta, eval0, &cfg.lm, valid(lay.n_pairs), &cfg.progress);
+        let mut out = iterate(
+            &prob,
+            theta,
+            eval0,
+            &cfg.lm,
+            valid(lay.n_pairs),
+            &cfg.progress,
+        );
         let mut prob = prob;
         let mut lay = lay;
         let mut n_params = n_params;
@@ -428,12 +440,19 @@ impl Estimator for MlRefine {
             let Ok(ev2) = prob2.evaluate(&theta2) else {
                 break;
             };
-            let out2 = iterate(&prob2, theta2, ev2, &cfg.lm, valid(lay2.n_pairs), &cfg.progress);
+            let out2 = iterate(
+                &prob2,
+                theta2,
+                ev2,
+                &cfg.lm,
+                valid(lay2.n_pairs),
+                &cfg.progress,
+            );
             let n_params2 = lay2.n_nl() + m * lay2.n_lin();
             let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
             let f_stat = ((out.eval.cost - out2.eval.cost) / ((n_params2 - n_params) as f64 / 2.0))
                 / (out2.eval.cost / dof2);
-            if !(f_stat > cfg.min_f) || !out2.convergence.is_converged() {
+            if f_stat.is_nan() || f_stat <= cfg.min_f || !out2.convergence.is_converged() {
                 messages.push(format!(
                     "a mode added at {f_new:.2} Hz (the residual's peak) did not explain more than noise (F = {f_stat:.1}): not kept"
                 ));
@@ -511,7 +530,7 @@ impl Estimator for MlRefine {
                 condition: f64::INFINITY,
                 hint: "check the data for non-finite values".into(),
             })?;
-        if n_nl > 0 && !(cond <= cfg.max_condition) {
+        if n_nl > 0 && (cond.is_nan() || cond > cfg.max_condition) {
             return Err(MlError::Unidentifiable {
                 what: describe_param(&lay, &out.theta, weakest, &fitted),
                 condition: cond,

@@ -33,7 +33,7 @@ pub fn normal_upper_tail(z: f64) -> f64 {
 
 /// `P(X > x)` for `X ~ chi-square(k)` (Wilson-Hilferty).
 pub fn chi2_upper_tail(x: f64, k: f64) -> f64 {
-    if !(k > 0.0) || !x.is_finite() {
+    if k.is_nan() || k <= 0.0 || !x.is_finite() {
         return f64::NAN;
     }
     if x <= 0.0 {

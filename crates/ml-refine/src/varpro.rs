@@ -318,7 +318,7 @@ impl Problem {
                 for (l, &nl) in norms.iter().enumerate() {
                     let r = a[l * rows + l].abs();
                     let ratio = if nl > 0.0 { r / nl } else { 0.0 };
-                    if !(ratio > 1e-11) {
+                    if ratio.is_nan() || ratio <= 1e-11 {
                         return Err(Singular {
                             entry: e,
                             column: l,

@@ -31,14 +31,21 @@ fn predicted_standard_deviations_match_the_monte_carlo_spread() {
         let fit = MlRefine::default()
             .estimate(&d, ChainModel::from(start))
             .unwrap();
-        assert!(fit.convergence.is_converged(), "seed {s}: {:?}", fit.convergence);
+        assert!(
+            fit.convergence.is_converged(),
+            "seed {s}: {:?}",
+            fit.convergence
+        );
         ratios.push(fit.report.cost_ratio);
         for (q, (m, t)) in fit.report.modes.iter().zip(&truth.modal.pairs).enumerate() {
             f_est[q].push(m.f_hz);
             z_est[q].push(m.zeta);
             f_std[q].push(m.f_hz_std);
             z_std[q].push(m.zeta_std);
-            for (est, sd, tv) in [(m.f_hz, m.f_hz_std, t.f_hz()), (m.zeta, m.zeta_std, t.zeta())] {
+            for (est, sd, tv) in [
+                (m.f_hz, m.f_hz_std, t.f_hz()),
+                (m.zeta, m.zeta_std, t.zeta()),
+            ] {
                 cases += 1;
                 if (est - tv).abs() <= 1.959_964 * sd {
                     inside += 1;
@@ -72,8 +79,14 @@ fn predicted_standard_deviations_match_the_monte_carlo_spread() {
             sf / mf,
             sz / mz
         );
-        assert!((sf / mf - 1.0).abs() <= 0.25, "mode {q}: f spread {sf:.3e}, predicted {mf:.3e}");
-        assert!((sz / mz - 1.0).abs() <= 0.25, "mode {q}: zeta spread {sz:.3e}, predicted {mz:.3e}");
+        assert!(
+            (sf / mf - 1.0).abs() <= 0.25,
+            "mode {q}: f spread {sf:.3e}, predicted {mf:.3e}"
+        );
+        assert!(
+            (sz / mz - 1.0).abs() <= 0.25,
+            "mode {q}: zeta spread {sz:.3e}, predicted {mz:.3e}"
+        );
     }
     assert!((0.90..=0.99).contains(&coverage), "coverage {coverage:.3}");
 }
