@@ -150,5 +150,8 @@ fn refine_ml_reports_the_uncertainty_of_the_modes() {
         assert!(mo["zeta_std"].as_f64().unwrap() > 0.0, "{mo}");
     }
     let md = std::fs::read_to_string(report.join("report.md")).unwrap();
-    assert!(md.contains("+- 2 sigma"), "the fit table shows the intervals");
+    assert!(
+        md.contains("+- 2 sigma"),
+        "the fit table shows the intervals"
+    );
 }
