@@ -9,7 +9,7 @@
 
 mod common;
 use common::*;
-use frf_data::{ChainModel, Estimator};
+use frf_data::{ChainModel, Estimator, FrfDataset};
 use ml_refine::MlRefine;
 
 #[test]
@@ -89,4 +89,49 @@ fn predicted_standard_deviations_match_the_monte_carlo_spread() {
         );
     }
     assert!((0.90..=0.99).contains(&coverage), "coverage {coverage:.3}");
+}
+
+/// Without a variance the criterion is weighted least squares (here eq. (27), `1/|G|^2`,
+/// which for noise proportional to `|G|` is the inverse variance up to a scale) and the
+/// noise scale comes from the residual: the standard deviations agree with those of the
+/// ML fit with the measured variance.
+#[test]
+fn noise_scale_from_the_residual_gives_the_same_uncertainty() {
+    let truth = system(11, 2, 2, 3, false, false);
+    let d = data(&truth, 400, 1e-3, 77);
+    let bare = frf_data::Frf::new(
+        d.freq_hz_slice().to_vec(),
+        d.ny(),
+        d.nu(),
+        d.values().to_vec(),
+        None,
+    )
+    .unwrap();
+    let start = perturbed(&truth, 0.002, 0.1, 77);
+    let ml = MlRefine::default()
+        .estimate(&d, ChainModel::from(start.clone()))
+        .unwrap();
+    let wls = MlRefine::default()
+        .estimate(&bare, ChainModel::from(start))
+        .unwrap();
+    assert_eq!(wls.report.noise, "estimated from the residual");
+    assert!(wls.report.p_value.is_none());
+    println!(
+        "noise scale from the residual: {:.3e} (relative noise 1e-3)",
+        wls.report.covariance_scale.sqrt()
+    );
+    for (a, b) in ml.report.modes.iter().zip(&wls.report.modes) {
+        println!(
+            "f std {:.3e} vs {:.3e}, zeta std {:.3e} vs {:.3e}",
+            a.f_hz_std, b.f_hz_std, a.zeta_std, b.zeta_std
+        );
+        assert!(
+            (a.f_hz_std / b.f_hz_std - 1.0).abs() < 0.1,
+            "{a:?} vs {b:?}"
+        );
+        assert!(
+            (a.zeta_std / b.zeta_std - 1.0).abs() < 0.1,
+            "{a:?} vs {b:?}"
+        );
+    }
 }
