@@ -424,6 +424,10 @@ impl Estimator for MlRefine {
             };
             let mut lay2 = lay.clone();
             lay2.n_pairs += 1;
+            let n_params2 = lay2.n_nl() + m * lay2.n_lin();
+            if 2 * n < lay2.n_lin() + lay2.n_nl() + 1 || 2 * n * m <= n_params2 {
+                break;
+            }
             let np = lay.n_pairs;
             let wn = TAU * f_new;
             let z0 = 0.01;
@@ -448,7 +452,6 @@ impl Estimator for MlRefine {
                 valid(lay2.n_pairs),
                 &cfg.progress,
             );
-            let n_params2 = lay2.n_nl() + m * lay2.n_lin();
             let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
             let f_stat = ((out.eval.cost - out2.eval.cost) / ((n_params2 - n_params) as f64 / 2.0))
                 / (out2.eval.cost / dof2);
