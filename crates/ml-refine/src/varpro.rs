@@ -529,12 +529,14 @@ mod tests {
 
     #[test]
     fn projected_jacobian_matches_finite_differences_at_zero_residual() {
-        for (const_num, delay, ts, small) in [
-            (false, true, None, true),
-            (false, true, None, false),
-            (true, true, None, false),
-            (false, false, Some(2.5e-4), false),
-            (true, true, Some(2.5e-4), false),
+        for (const_num, delay, ts, small, dynx) in [
+            (false, true, None, true, false),
+            (false, true, None, false, false),
+            (true, true, None, false, false),
+            (false, false, Some(2.5e-4), false, false),
+            (true, true, Some(2.5e-4), false, false),
+            (false, true, None, false, true),
+            (true, false, Some(2.5e-4), false, true),
         ] {
             let ny = if small { 1 } else { 2 };
             let mut mm = ModalModel::new(ny, 1);
@@ -564,6 +566,21 @@ mod tests {
             if let Some(t) = ts {
                 fm.factors.hold = realize::Hold::Zoh { fs_hz: 1.0 / t };
             }
+            if dynx {
+                fm.factors
+                    .dynamics
+                    .push(realize::DynamicsFactor::second_order(
+                        realize::FactorTarget::Output(1),
+                        300.0,
+                        0.2,
+                    ));
+                let mut lead =
+                    realize::DynamicsFactor::first_order(realize::FactorTarget::All, 700.0);
+                lead.num = vec![0.3];
+                fm.factors.dynamics.push(lead);
+                fm.factors.crosstalk =
+                    Some(faer::Mat::from_fn(ny, 1, |i, _| 0.01 * (i as f64 + 1.0)));
+            }
             let omega: Vec<f64> = (1..200)
                 .map(|k| 2.0 * std::f64::consts::PI * 5.0 * k as f64)
                 .collect();
@@ -575,9 +592,9 @@ mod tests {
                 n_real: if small { 0 } else { 1 },
                 n_rigid: 0,
                 feedthrough: false,
-                crosstalk: false,
+                crosstalk: dynx,
                 delay,
-                dynamics: vec![],
+                dynamics: if dynx { vec![(2, 0), (1, 1)] } else { vec![] },
                 const_num,
             };
             let sw: Vec<f64> = g.iter().map(|v| 2f64.sqrt() / v.norm()).collect();
@@ -589,8 +606,12 @@ mod tests {
             if delay {
                 theta.push(1.5e-4);
             }
+            for d in &fm.factors.dynamics {
+                theta.extend_from_slice(&d.den);
+                theta.extend_from_slice(&d.num);
+            }
             let n = theta.len();
-            if delay {
+            if delay && !dynx {
                 // one Gauss-Newton step from a delay 1e-8 s off returns to the truth
                 let mut t1 = theta.clone();
                 t1[n - 1] += 1e-8;
