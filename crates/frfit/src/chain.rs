@@ -28,6 +28,7 @@ use frf_data::{
     ChainModel, ChainOutput, ChainSettings, DelayChoice, InitLink, Initializer, LinkReport,
     RefineLink, Refiner,
 };
+use ml_refine::{MlConfig, MlRefine};
 
 /// Options of the additive links that the pipeline sets beyond [`ChainSettings`].
 #[derive(Debug, Clone)]
@@ -38,6 +39,9 @@ pub struct AdditiveOptions {
     pub adapt: Option<AdaptConfig>,
     /// Rigid-body choice of the CMIF initialiser.
     pub rigid_body: RigidBody,
+    /// Realizations the data's variance was estimated from, when declared (the ML
+    /// refiner's cost test expects `V / N_dof = (R - 1) / (R - 2)` then).
+    pub realizations: Option<usize>,
 }
 
 impl Default for AdditiveOptions {
@@ -46,6 +50,7 @@ impl Default for AdditiveOptions {
             riv: RivConfig::default(),
             adapt: Some(AdaptConfig::default()),
             rigid_body: RigidBody::Auto,
+            realizations: None,
         }
     }
 }
@@ -107,6 +112,18 @@ fn make_riv(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
     })
 }
 
+fn make_ml(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
+    Box::new(RefineLink {
+        name: "ml".into(),
+        estimator: MlRefine::new(MlConfig {
+            weighting: s.weighting.clone(),
+            realizations: o.realizations,
+            progress: s.progress.clone(),
+            ..Default::default()
+        }),
+    })
+}
+
 /// The initialisers frfit knows.
 pub const INITIALIZERS: &[InitEntry] = &[InitEntry {
     name: "cmif",
@@ -126,12 +143,17 @@ pub const REFINERS: &[RefineEntry] = &[
         description: "no refinement: the initialiser's model as it is",
         make: None,
     },
+    RefineEntry {
+        name: "ml",
+        description: "maximum likelihood (Levenberg-Marquardt, variable projection) with parameter uncertainty",
+        make: Some(make_ml),
+    },
 ];
 
 /// Methods of the design that are not implemented yet, named in the error so that a
 /// user knows they are planned and what to use instead.
 const PLANNED_INIT: &[&str] = &["sk", "subspace"];
-const PLANNED_REFINE: &[&str] = &["ml"];
+const PLANNED_REFINE: &[&str] = &[];
 
 fn unknown(option: &str, name: &str, known: &[&str], planned: &[&str]) -> FrfitError {
     let why = if planned.contains(&name) {

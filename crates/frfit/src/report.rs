@@ -1186,16 +1186,53 @@ fn markdown(
     if f.modes.is_empty() {
         let _ = writeln!(md, "No flexible modes.\n");
     } else {
-        let _ = writeln!(md, "| mode | f [Hz] | zeta |");
-        let _ = writeln!(md, "|---:|---:|---:|");
-        for (k, mo) in f.modes.iter().enumerate() {
-            let _ = writeln!(
-                md,
-                "| {} | {} | {} |",
-                k + 1,
-                fmt_num(mo.f_hz),
-                fmt_num(mo.zeta)
-            );
+        match &s.uncertainty {
+            Some(u) => {
+                let _ = writeln!(
+                    md,
+                    "| mode | f [Hz] | +- 2 sigma [Hz] | zeta | +- 2 sigma |"
+                );
+                let _ = writeln!(md, "|---:|---:|---:|---:|---:|");
+                for (k, mo) in f.modes.iter().enumerate() {
+                    let (sf, sz) = u
+                        .mode_std(mo.f_hz)
+                        .map(|(a, b)| (fmt_num(2.0 * a), fmt_num(2.0 * b)))
+                        .unwrap_or_default();
+                    let _ = writeln!(
+                        md,
+                        "| {} | {} | {} | {} | {} |",
+                        k + 1,
+                        fmt_num(mo.f_hz),
+                        sf,
+                        fmt_num(mo.zeta),
+                        sz
+                    );
+                }
+                let _ = writeln!(
+                    md,
+                    "\nStandard deviations from the {} refinement ({}; cost ratio V/N_dof {}{}, covariance scaled by {}).",
+                    u.method,
+                    u.noise,
+                    fmt_num(u.cost_ratio),
+                    u.p_value
+                        .map(|p| format!(", p = {p:.2e}"))
+                        .unwrap_or_default(),
+                    fmt_num(u.covariance_scale)
+                );
+            }
+            None => {
+                let _ = writeln!(md, "| mode | f [Hz] | zeta |");
+                let _ = writeln!(md, "|---:|---:|---:|");
+                for (k, mo) in f.modes.iter().enumerate() {
+                    let _ = writeln!(
+                        md,
+                        "| {} | {} | {} |",
+                        k + 1,
+                        fmt_num(mo.f_hz),
+                        fmt_num(mo.zeta)
+                    );
+                }
+            }
         }
         let _ = writeln!(md);
     }

@@ -15,7 +15,15 @@
 //!   "final_model": {modes: [{f_hz, zeta}], order, delay_s, hold, rigid_body_integrators,
 //!                   feedthrough, dynamics: [..], iterations, convergence},
 //!   "final": {median_rel, p95_rel, residual_to_noise},
-//!   "data_noise_median_rel": ..., "timings": [{stage, seconds}] }
+//!   "data_noise_median_rel": ..., "timings": [{stage, seconds}],
+//!   "uncertainty": {method, noise, cost_ratio, expected_ratio, p_value, covariance_scale,
+//!                   modes: [{f_hz, f_hz_std, zeta, zeta_std}], delay_s, delay_s_std} }
+//! ```
+//!
+//! `uncertainty` is present after `frfit fit --refine ml` (the standard deviations of the
+//! maximum-likelihood refinement at its optimum); absent otherwise.
+//!
+//! ```text
 //! ```
 
 use serde::{Deserialize, Serialize};
@@ -193,4 +201,56 @@ pub struct Summary {
     /// otherwise.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub chain_runs: Vec<crate::chain::ChainRun>,
+    /// Standard deviations of the final model's parameters, when the refiner computed
+    /// them (`--refine ml` in `frfit fit`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<UncertaintySummary>,
+}
+
+/// A mode with the standard deviations of its frequency and damping.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ModeUncertaintySummary {
+    /// Natural frequency, Hz.
+    pub f_hz: f64,
+    /// Its standard deviation, Hz.
+    pub f_hz_std: f64,
+    /// Relative damping.
+    pub zeta: f64,
+    /// Its standard deviation.
+    pub zeta_std: f64,
+}
+
+/// The uncertainty of the final model from the refiner's covariance at its optimum.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UncertaintySummary {
+    /// The refiner that computed it (`ml`).
+    pub method: String,
+    /// `measured variance` (maximum likelihood) or `estimated from the residual`.
+    pub noise: String,
+    /// The cost test: `V / N_dof` at the optimum.
+    pub cost_ratio: f64,
+    /// Its expected value under the noise model.
+    pub expected_ratio: f64,
+    /// Its p-value (`None` without a measured variance).
+    pub p_value: Option<f64>,
+    /// The factor the inverse Fisher information was scaled by.
+    pub covariance_scale: f64,
+    /// Per mode, in increasing frequency.
+    pub modes: Vec<ModeUncertaintySummary>,
+    /// The fitted delay, seconds.
+    pub delay_s: Option<f64>,
+    /// Its standard deviation, seconds.
+    pub delay_s_std: Option<f64>,
+}
+
+impl UncertaintySummary {
+    /// The standard deviations `(f_hz_std, zeta_std)` of the mode nearest `f_hz` (within
+    /// 1e-6 relative), when there is one.
+    pub fn mode_std(&self, f_hz: f64) -> Option<(f64, f64)> {
+        self.modes
+            .iter()
+            .filter(|m| (m.f_hz - f_hz).abs() <= 1e-6 * f_hz.abs())
+            .min_by(|a, b| (a.f_hz - f_hz).abs().total_cmp(&(b.f_hz - f_hz).abs()))
+            .map(|m| (m.f_hz_std, m.zeta_std))
+    }
 }

@@ -18,7 +18,6 @@ fn unknown_and_planned_methods_name_the_choices() {
         ("--init", "bogus", "unknown method; available: cmif"),
         ("--init", "subspace", "not implemented in this version"),
         ("--refine", "bogus", "available: riv, none"),
-        ("--refine", "ml", "not implemented in this version"),
     ] {
         let o = run(&[
             "fit",
@@ -114,4 +113,45 @@ fn the_chain_is_recorded_and_refine_none_writes_the_start() {
     for (f, t) in freqs(&n).iter().zip(MODES_HZ) {
         assert!((f / t - 1.0).abs() < 0.01, "start {f} vs {t}");
     }
+}
+
+#[test]
+fn refine_ml_reports_the_uncertainty_of_the_modes() {
+    let dir = temp_dir("chain-ml");
+    let csv = write_plant(&dir, 0.0);
+    let model = dir.join("ml.json");
+    let report = dir.join("report");
+    let o = run(&[
+        "fit",
+        csv.to_str().unwrap(),
+        "--delay",
+        "none",
+        "--refine",
+        "ml",
+        "--out",
+        model.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m = read_json(&model);
+    assert_eq!(m["provenance"]["chain"], serde_json::json!(["cmif", "ml"]));
+    let s = read_json(&report.join("summary.json"));
+    let u = &s["uncertainty"];
+    assert_eq!(u["method"], "ml");
+    let modes = u["modes"].as_array().unwrap();
+    assert_eq!(modes.len(), 3, "{u}");
+    for (mo, t) in modes.iter().zip(MODES_HZ) {
+        let f = mo["f_hz"].as_f64().unwrap();
+        let sf = mo["f_hz_std"].as_f64().unwrap();
+        assert!((f / t - 1.0).abs() < 1e-6, "{f} vs {t}");
+        assert!(sf > 0.0 && sf < 1e-2, "{mo}");
+        assert!(mo["zeta_std"].as_f64().unwrap() > 0.0, "{mo}");
+    }
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(
+        md.contains("+- 2 sigma"),
+        "the fit table shows the intervals"
+    );
 }

@@ -134,8 +134,9 @@ pub struct FitOptions {
     /// smallest final prediction error is kept), or `auto` (every initialiser).
     #[arg(long, default_value = "cmif", value_name = "NAME[,NAME..]|auto")]
     pub init: String,
-    /// Refiner of the estimator chain: `riv` (refined IV with mode adaptation) or `none`
-    /// (the initialiser's model as it is).
+    /// Refiner of the estimator chain: `riv` (refined IV with mode adaptation), `ml`
+    /// (maximum likelihood with the standard deviations of the modes) or `none` (the
+    /// initialiser's model as it is).
     #[arg(long, default_value = "riv", value_name = "NAME")]
     pub refine: String,
     /// Model order (number of states) for the initialisers that take one (sk,

@@ -67,9 +67,37 @@ pub fn print_fit(out: &PipelineOutput) {
             out.fit.convergence.describe()
         );
     }
-    println!("     f [Hz]      zeta");
-    for m in &s.final_model.modes {
-        println!("  {:>10.4}  {:>8.5}", m.f_hz, m.zeta);
+    match &s.uncertainty {
+        Some(u) => {
+            println!("     f [Hz]   +- 2 sigma        zeta   +- 2 sigma");
+            for m in &s.final_model.modes {
+                match u.mode_std(m.f_hz) {
+                    Some((sf, sz)) => println!(
+                        "  {:>10.4}  {:>10.2e}  {:>10.5}  {:>10.2e}",
+                        m.f_hz,
+                        2.0 * sf,
+                        m.zeta,
+                        2.0 * sz
+                    ),
+                    None => println!("  {:>10.4}  {:>10}  {:>10.5}", m.f_hz, "", m.zeta),
+                }
+            }
+            println!(
+                "uncertainty: {} ({}), cost ratio {:.3}{}",
+                u.method,
+                u.noise,
+                u.cost_ratio,
+                u.p_value
+                    .map(|p| format!(" (p = {p:.2e})"))
+                    .unwrap_or_default()
+            );
+        }
+        None => {
+            println!("     f [Hz]      zeta");
+            for m in &s.final_model.modes {
+                println!("  {:>10.4}  {:>8.5}", m.f_hz, m.zeta);
+            }
+        }
     }
     println!(
         "error vs data: median {:.3e}, p95 {:.3e}, residual/noise {:.3}{}",

@@ -77,6 +77,7 @@ pub fn chain_fit(
         riv: fc.riv.clone(),
         adapt: fc.adapt.clone(),
         rigid_body: fc.rigid_body,
+        realizations: ctx.declared.realizations,
     };
     let result = run_chain(&ctx.band, &cfg.init, &cfg.refine, &settings, &opts)?;
     let model = match result.model.native::<AdditiveModel>() {

@@ -297,6 +297,12 @@ pub fn run(
             timings: timings.0,
             chain: first.chain.clone(),
             chain_runs: first.chain_runs.clone(),
+            // the diagnosis refits the model: the chain's covariance no longer applies
+            uncertainty: if cfg.diagnose {
+                None
+            } else {
+                summarize::ml_uncertainty(&first.links)
+            },
         },
     );
     let peaks = fitter_report.cmif_peaks.clone();

@@ -197,6 +197,37 @@ pub(crate) struct RunRecord<'a> {
     pub chain: Vec<String>,
     /// Every chain tried by a multi-initialiser first fit.
     pub chain_runs: Vec<crate::chain::ChainRun>,
+    /// The refiner's uncertainty of the final model, when it has one.
+    pub uncertainty: Option<UncertaintySummary>,
+}
+
+/// The uncertainty of the ML link of `links` (its report in `details`), for a final
+/// model that is the chain's own (`frfit fit`, no diagnosis steps).
+pub(crate) fn ml_uncertainty(links: &[frf_data::LinkReport]) -> Option<UncertaintySummary> {
+    let l = links.iter().rev().find(|l| l.link == "ml")?;
+    let r: ml_refine::MlReport = serde_json::from_value(l.details.clone()).ok()?;
+    let mut modes: Vec<ModeUncertaintySummary> = r
+        .modes
+        .iter()
+        .map(|m| ModeUncertaintySummary {
+            f_hz: m.f_hz,
+            f_hz_std: m.f_hz_std,
+            zeta: m.zeta,
+            zeta_std: m.zeta_std,
+        })
+        .collect();
+    modes.sort_by(|a, b| a.f_hz.total_cmp(&b.f_hz));
+    Some(UncertaintySummary {
+        method: "ml".into(),
+        noise: r.noise,
+        cost_ratio: r.cost_ratio,
+        expected_ratio: r.expected_ratio,
+        p_value: r.p_value,
+        covariance_scale: r.covariance_scale,
+        modes,
+        delay_s: r.delay_s,
+        delay_s_std: r.delay_s_std,
+    })
 }
 
 /// The summary of a run on `ctx` with `cfg`.
@@ -247,5 +278,6 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
         timings: run.timings,
         chain: run.chain,
         chain_runs: run.chain_runs,
+        uncertainty: run.uncertainty,
     }
 }

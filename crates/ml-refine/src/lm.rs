@@ -1,0 +1,258 @@
+//! Levenberg-Marquardt iterations on the variable-projection problem, and the
+//! covariance of the nonlinear parameters at the optimum.
+//!
+//! Each step solves `min ||J d - r||^2 + lambda ||D d||^2` (`D`: the column norms of
+//! `J`, Marquardt's scaling) by a QR of `[R; sqrt(lambda) D]`, with `R` the merged
+//! factor of [`Problem::jacobian_r`]; a step is taken when it lowers the cost, and
+//! `lambda` shrinks after a success and grows after a failure.
+
+use crate::qr::{back_substitute, householder_r};
+use crate::varpro::{Eval, Problem, Singular};
+use frf_data::{Convergence, ProgressSink};
+
+/// Stopping rules of the iterations, with documented defaults.
+#[derive(Debug, Clone)]
+pub struct LmSettings {
+    /// Iteration limit. Default: 100.
+    pub max_iterations: usize,
+    /// Stop when an accepted step lowers the cost by less than this fraction. Default:
+    /// 1e-12.
+    pub cost_tol: f64,
+    /// Stop when the scaled step `||D d|| / ||D theta||` is below this. Default: 1e-12.
+    pub step_tol: f64,
+    /// Stop when the linearised decrease `||Q^T r||^2 / ||r||^2` (the part of the
+    /// residual the Jacobian can still explain) is below this. Default: 1e-14.
+    pub gradient_tol: f64,
+    /// Initial damping (relative to the column scaling). Default: 1e-3.
+    pub lambda0: f64,
+}
+
+impl Default for LmSettings {
+    fn default() -> Self {
+        Self {
+            max_iterations: 100,
+            cost_tol: 1e-12,
+            step_tol: 1e-12,
+            gradient_tol: 1e-14,
+            lambda0: 1e-3,
+        }
+    }
+}
+
+/// The outcome of the iterations.
+pub(crate) struct LmOutcome {
+    pub theta: Vec<f64>,
+    pub eval: Eval,
+    pub cost_history: Vec<f64>,
+    pub iterations: usize,
+    pub convergence: Convergence,
+    /// The `R` factor of `[J | r]` at `theta`, `(n + 1)^2` column-major.
+    pub r: Vec<f64>,
+    /// The norms of the Jacobian's columns before the projection at `theta`.
+    pub vnorm: Vec<f64>,
+}
+
+/// One damped step: solves `[R; sqrt(lambda) D] d = [z; 0]` in the least-squares sense.
+fn damped_step(r: &[f64], n: usize, lambda: f64, dcol: &[f64]) -> Vec<f64> {
+    let nb = n + 1;
+    let rows = 2 * n;
+    let mut a = vec![0.0; rows * nb];
+    for c in 0..n {
+        for i in 0..=c {
+            a[c * rows + i] = r[c * nb + i];
+        }
+        a[c * rows + n + c] = lambda.sqrt() * dcol[c];
+    }
+    for i in 0..n {
+        a[n * rows + i] = r[n * nb + i];
+    }
+    householder_r(&mut a, rows, nb);
+    let mut d: Vec<f64> = (0..n).map(|i| a[n * rows + i]).collect();
+    back_substitute(&a, rows, 0, n, &mut d);
+    d
+}
+
+/// Column norms of `R` (the column norms of `J`); 1 for a zero column.
+pub(crate) fn column_norms(r: &[f64], n: usize) -> Vec<f64> {
+    let nb = n + 1;
+    (0..n)
+        .map(|c| {
+            let s: f64 = (0..=c).map(|i| r[c * nb + i] * r[c * nb + i]).sum();
+            if s > 0.0 {
+                s.sqrt()
+            } else {
+                1.0
+            }
+        })
+        .collect()
+}
+
+/// Runs the iterations from `theta0` (whose evaluation is `eval0`). `valid` rejects a
+/// trial point outside the parameter domain (a pole pair crossing the real axis).
+pub(crate) fn iterate(
+    prob: &Problem,
+    theta0: Vec<f64>,
+    eval0: Eval,
+    s: &LmSettings,
+    valid: impl Fn(&[f64]) -> bool,
+    progress: &ProgressSink,
+) -> LmOutcome {
+    let n = theta0.len();
+    let nb = n + 1;
+    let mut theta = theta0;
+    let mut ev = eval0;
+    let mut hist = vec![ev.cost];
+    let mut lambda = s.lambda0;
+    let mut it = 0;
+    let mut conv = Convergence::MaxIterations {
+        limit: s.max_iterations,
+    };
+    let (mut r, mut vnorm) = prob.jacobian_r(&theta, &ev);
+    if n == 0 {
+        return LmOutcome {
+            theta,
+            eval: ev,
+            cost_history: hist,
+            iterations: 0,
+            convergence: Convergence::Direct,
+            r,
+            vnorm,
+        };
+    }
+    while it < s.max_iterations {
+        let z2: f64 = (0..n).map(|i| r[n * nb + i] * r[n * nb + i]).sum();
+        let r2 = 2.0 * ev.cost;
+        if r2 == 0.0 || z2 <= s.gradient_tol * r2 {
+            conv = Convergence::CostTolerance {
+                relative_change: if r2 > 0.0 { z2 / r2 } else { 0.0 },
+            };
+            break;
+        }
+        let dcol = column_norms(&r, n);
+        it += 1;
+        let mut accepted = None;
+        while lambda < 1e16 {
+            let d = damped_step(&r, n, lambda, &dcol);
+            let trial: Vec<f64> = theta.iter().zip(&d).map(|(a, b)| a + b).collect();
+            if d.iter().all(|x| x.is_finite()) && valid(&trial) {
+                if let Ok(e2) = prob.evaluate(&trial) {
+                    if e2.cost.is_finite() && e2.cost < ev.cost {
+                        accepted = Some((trial, e2, d));
+                        break;
+                    }
+                }
+            }
+            lambda *= 4.0;
+        }
+        let Some((trial, e2, d)) = accepted else {
+            // no damped step lowers the cost: a stationary point to rounding
+            let pred = z2 / r2;
+            conv = if pred < 1e-8 {
+                Convergence::CostTolerance {
+                    relative_change: pred,
+                }
+            } else {
+                Convergence::Failed {
+                    reason: format!(
+                        "no step lowers the cost although the linearisation predicts a relative decrease of {pred:.2e}"
+                    ),
+                }
+            };
+            break;
+        };
+        let rel = (ev.cost - e2.cost) / ev.cost;
+        let num: f64 = d.iter().zip(&dcol).map(|(a, b)| (a * b).powi(2)).sum();
+        let den: f64 = theta.iter().zip(&dcol).map(|(a, b)| (a * b).powi(2)).sum();
+        let step = (num / den.max(f64::MIN_POSITIVE)).sqrt();
+        theta = trial;
+        ev = e2;
+        hist.push(ev.cost);
+        lambda = (lambda / 5.0).max(1e-12);
+        (r, vnorm) = prob.jacobian_r(&theta, &ev);
+        progress.step(
+            "ml",
+            it,
+            Some(s.max_iterations),
+            Some(ev.cost),
+            "Levenberg-Marquardt",
+        );
+        if step < s.step_tol {
+            conv = Convergence::ParameterTolerance {
+                relative_change: step,
+            };
+            break;
+        }
+        if rel < s.cost_tol {
+            conv = Convergence::CostTolerance {
+                relative_change: rel,
+            };
+            break;
+        }
+    }
+    LmOutcome {
+        theta,
+        eval: ev,
+        cost_history: hist,
+        iterations: it,
+        convergence: conv,
+        r,
+        vnorm,
+    }
+}
+
+/// The unscaled covariance `(R^T R)^{-1}` of the nonlinear parameters (`R`: the first
+/// `n` columns of the merged factor), by an SVD of `R` with its columns scaled by
+/// `scale` (the norms of the Jacobian's columns before the projection, so that a
+/// parameter the linear terms can imitate shows as a small singular value), with the
+/// condition number of the scaled information matrix and the index of the parameter
+/// that dominates its weakest direction.
+pub(crate) fn covariance(
+    r: &[f64],
+    n: usize,
+    scale: &[f64],
+) -> Result<(Vec<f64>, f64, usize), Singular> {
+    let nb = n + 1;
+    let dcol: Vec<f64> = scale
+        .iter()
+        .map(|&x| if x > 0.0 { x } else { 1.0 })
+        .collect();
+    let rs = faer::Mat::from_fn(
+        n,
+        n,
+        |i, j| if i <= j { r[j * nb + i] / dcol[j] } else { 0.0 },
+    );
+    let svd = rs.thin_svd().map_err(|_| Singular {
+        entry: usize::MAX,
+        column: 0,
+        ratio: 0.0,
+    })?;
+    let sv: Vec<f64> = (0..n).map(|i| svd.S()[i]).collect();
+    let smax = sv.iter().cloned().fold(0.0, f64::max);
+    let (imin, smin) =
+        sv.iter().cloned().enumerate().fold(
+            (0, f64::INFINITY),
+            |a, (i, x)| if x < a.1 { (i, x) } else { a },
+        );
+    let v = svd.V();
+    let weakest = (0..n)
+        .max_by(|&a, &b| v[(a, imin)].abs().total_cmp(&v[(b, imin)].abs()))
+        .unwrap_or(0);
+    let cond = if smin > 0.0 {
+        (smax / smin).powi(2)
+    } else {
+        f64::INFINITY
+    };
+    let mut cov = vec![0.0; n * n];
+    if smin > 0.0 {
+        for a in 0..n {
+            for b in 0..n {
+                let mut s = 0.0;
+                for k in 0..n {
+                    s += v[(a, k)] * v[(b, k)] / (sv[k] * sv[k]);
+                }
+                cov[b * n + a] = s / (dcol[a] * dcol[b]);
+            }
+        }
+    }
+    Ok((cov, cond, weakest))
+}

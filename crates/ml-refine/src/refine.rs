@@ -1,0 +1,641 @@
+//! [`MlRefine`]: the maximum-likelihood refiner of the estimator chain (`--refine ml`).
+//!
+//! It minimises McKelvey's criterion (23) with the measured (nonparametric) variance as
+//! the fixed noise model, `V = sum_k sum_e |G_ke - P_ke(theta)|^2 / var_ke` (the noise
+//! scale `lambda` eliminated, see the errata), over the modal parameters of the model
+//! currency, by Levenberg-Marquardt on the variable-projection problem
+//! ([`crate::varpro`]). Without a variance, it minimises the weighted least-squares
+//! criterion with the data set's weighting and estimates the noise scale from the
+//! residual (the report says so).
+//!
+//! At the optimum, the covariance of the poles (and of the delay and dynamics factors)
+//! is the inverse Fisher information, `(J^T W J)^{-1}` (McKelvey eq. (31)-(32): the
+//! Cramer-Rao bound when the variance is the true one), scaled by the cost ratio
+//! `V / N_dof` when the noise scale is estimated from the residual, and by `max(1,
+//! V / N_dof)` with a measured variance (a variance estimated from few realizations
+//! makes `E{V / N_dof} = (R - 1) / (R - 2)`; model errors raise it too; the bound is
+//! never shrunk). The standard deviations of each mode's natural frequency and damping
+//! follow by the delta method.
+
+use crate::lm::{covariance, iterate, LmSettings};
+use crate::stats::{chi2_upper_tail, normal_upper_tail};
+use crate::varpro::{Layout, Problem, ResidueForm};
+use crate::MlError;
+use crate::C64;
+use frf_data::{ChainModel, Convergence, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
+use realize::FrfModel;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::TAU;
+use std::time::Instant;
+
+/// How the covariance of the estimates is scaled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CovarianceScale {
+    /// With a measured variance: by `max(1, V / N_dof)`; without: by `V / N_dof` (the
+    /// noise scale estimated from the residual). The default.
+    #[default]
+    Auto,
+    /// The inverse Fisher information with the weights as inverse variances, unscaled.
+    Fisher,
+    /// Always by the cost ratio `V / N_dof`.
+    CostRatio,
+}
+
+/// Settings of [`MlRefine`], with documented defaults.
+#[derive(Debug, Clone)]
+pub struct MlConfig {
+    /// Weighting of the criterion. Default: [`Weighting::Auto`] (inverse variance, the
+    /// ML criterion, when the data carry a variance; eq. (27) of the wafer-stage paper
+    /// otherwise, with the noise scale from the residual).
+    pub weighting: Weighting,
+    /// Parametrisation of the residues. Default: [`ResidueForm::Auto`].
+    pub residues: ResidueForm,
+    /// Fit a feedthrough `D`. Default: `None`, when the start has a nonzero one.
+    pub feedthrough: Option<bool>,
+    /// Realizations the variance was estimated from, when known: sets the expected cost
+    /// ratio `(R - 1) / (R - 2)` of the cost test. Default: `None` (the variance is
+    /// taken as exact).
+    pub realizations: Option<usize>,
+    /// Covariance scaling. Default: [`CovarianceScale::Auto`].
+    pub covariance: CovarianceScale,
+    /// Iterations and tolerances. Default: [`LmSettings::default`].
+    pub lm: LmSettings,
+    /// Damping given to a start pole pair outside the open left half-plane (a real pole
+    /// is reflected). Default: 0.01.
+    pub zeta_unstable: f64,
+    /// Largest condition number of the column-scaled information matrix before a
+    /// parameter is called not identifiable. Default: 1e13.
+    pub max_condition: f64,
+    /// Modes the refinement may add where the residual shows a resonance the start
+    /// missed (only with a measured variance, while the cost test rejects the model at
+    /// 1e-3). Default: 4; 0 keeps the start's structure.
+    pub add_modes: usize,
+    /// Smallest F statistic (cost explained per added parameter over the noise scale)
+    /// for an added mode to be kept. Default: 25.
+    pub min_f: f64,
+    /// Progress callback.
+    pub progress: ProgressSink,
+}
+
+impl Default for MlConfig {
+    fn default() -> Self {
+        Self {
+            weighting: Weighting::Auto,
+            residues: ResidueForm::Auto,
+            feedthrough: None,
+            realizations: None,
+            covariance: CovarianceScale::Auto,
+            lm: LmSettings::default(),
+            zeta_unstable: 0.01,
+            max_condition: 1e13,
+            add_modes: 4,
+            min_f: 25.0,
+            progress: ProgressSink::none(),
+        }
+    }
+}
+
+/// A mode's natural frequency and damping with their standard deviations.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ModeUncertainty {
+    /// Natural frequency `|p| / 2 pi`, Hz.
+    pub f_hz: f64,
+    /// Its standard deviation, Hz.
+    pub f_hz_std: f64,
+    /// Relative damping `-Re p / |p|`.
+    pub zeta: f64,
+    /// Its standard deviation.
+    pub zeta_std: f64,
+}
+
+/// What [`MlRefine`] did and found.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct MlReport {
+    /// The weighting of the criterion.
+    pub weighting: String,
+    /// `measured variance` (the ML criterion) or `estimated from the residual`.
+    pub noise: String,
+    /// The residue parametrisation used (`complex` or `constant_numerator`).
+    pub residue_form: String,
+    /// Real parameters: nonlinear (poles, delay, dynamics) and in all.
+    pub n_nonlinear: usize,
+    /// Real parameters in all (linear ones included).
+    pub n_params: usize,
+    /// Real observations (2 per line and entry).
+    pub n_observations: usize,
+    /// Iterations run.
+    pub iterations: usize,
+    /// The cost `V` after each iteration (the first is the start's).
+    pub cost_history: Vec<f64>,
+    /// Whether a tolerance was met.
+    pub converged: bool,
+    /// Why the iterations stopped, in words.
+    pub convergence: String,
+    /// The cost at the optimum, `sum w |G - P|^2`.
+    pub cost: f64,
+    /// Residual degrees of freedom in complex terms, `N_dof = N m - n_params / 2`.
+    pub dof: f64,
+    /// `V / N_dof`: 1 at the noise level with the true variance (the cost test).
+    pub cost_ratio: f64,
+    /// Its expected value under the noise model (1, or `(R-1)/(R-2)` with a variance
+    /// from `R` realizations).
+    pub expected_ratio: f64,
+    /// Probability of a cost ratio this large or larger if the model were right and
+    /// the variance as assumed (`None` without a measured variance).
+    pub p_value: Option<f64>,
+    /// The factor the inverse Fisher information was multiplied by.
+    pub covariance_scale: f64,
+    /// Condition number of the column-scaled information matrix of the nonlinear
+    /// parameters.
+    pub information_condition: f64,
+    /// Per pole pair, in the model's order.
+    pub modes: Vec<ModeUncertainty>,
+    /// The delay, when it was fitted, seconds.
+    pub delay_s: Option<f64>,
+    /// Its standard deviation, seconds.
+    pub delay_s_std: Option<f64>,
+    /// Start frequencies (Hz) of the modes the refinement added.
+    #[serde(default)]
+    pub added_modes_hz: Vec<f64>,
+}
+
+/// The maximum-likelihood refiner (Gauss-Newton / Levenberg-Marquardt with variable
+/// projection) of the chain, from any [`ChainModel`]'s currency.
+#[derive(Debug, Clone, Default)]
+pub struct MlRefine {
+    /// Settings.
+    pub config: MlConfig,
+}
+
+impl MlRefine {
+    /// A refiner with the given settings.
+    pub fn new(config: MlConfig) -> Self {
+        Self { config }
+    }
+}
+
+fn describe_param(lay: &Layout, theta: &[f64], idx: usize, model: &FrfModel) -> String {
+    let np = lay.n_pairs;
+    if idx < 2 * np {
+        let q = idx / 2;
+        let p = C64::new(theta[2 * q], theta[2 * q + 1]);
+        return format!(
+            "the {} of the mode at {:.3} Hz (damping {:.2e})",
+            if idx.is_multiple_of(2) {
+                "real part (damping)"
+            } else {
+                "imaginary part (frequency)"
+            },
+            p.norm() / TAU,
+            -p.re / p.norm()
+        );
+    }
+    let idx = idx - 2 * np;
+    if idx < lay.n_real {
+        return format!("the real pole at {:.3e} rad/s", theta[2 * np + idx]);
+    }
+    let mut idx = idx - lay.n_real;
+    if lay.delay {
+        if idx == 0 {
+            return "the delay".into();
+        }
+        idx -= 1;
+    }
+    for (k, d) in model.factors.dynamics.iter().enumerate() {
+        let n = d.den.len() + d.num.len();
+        if idx < n {
+            return format!("coefficient {idx} of dynamics factor {k} ({:?})", d.target);
+        }
+        idx -= n;
+    }
+    "a parameter".into()
+}
+
+/// `E{V / N_dof}` with a variance from `realizations` realizations (`(R-1)/(R-2)`), 1
+/// when it is taken as exact.
+fn expected_ratio(realizations: Option<usize>) -> f64 {
+    match realizations {
+        Some(r) if r >= 4 => (r as f64 - 1.0) / (r as f64 - 2.0),
+        _ => 1.0,
+    }
+}
+
+/// The frequency (Hz) of the largest peak of the weighted residual energy
+/// `sum_e w |G - P|^2` per line (smoothed over 5 lines), away (more than two lines)
+/// from the model's modes; `None` when there is none.
+fn residual_peak(prob: &Problem, theta: &[f64], coef: &[f64], w: &[f64]) -> Option<f64> {
+    let fm = prob.model(theta, coef);
+    let resp = fm.freq_response(&prob.omega).ok()?;
+    let (n, m) = (prob.omega.len(), prob.lay.m());
+    let s: Vec<f64> = (0..n)
+        .map(|k| {
+            (0..m)
+                .map(|e| w[k * m + e] * (prob.g[k * m + e] - resp.values[k * m + e]).norm_sqr())
+                .sum()
+        })
+        .collect();
+    let smooth: Vec<f64> = (0..n)
+        .map(|k| s[k.saturating_sub(2)..(k + 3).min(n)].iter().sum())
+        .collect();
+    let dw = (prob.omega[n - 1] - prob.omega[0]) / (n.max(2) - 1) as f64;
+    let near = |wk: f64| {
+        fm.modal
+            .pairs
+            .iter()
+            .any(|p| (p.omega_n() - wk).abs() <= 2.0 * dw)
+    };
+    (0..n)
+        .filter(|&k| !near(prob.omega[k]))
+        .max_by(|&a, &b| smooth[a].total_cmp(&smooth[b]))
+        .map(|k| prob.omega[k] / TAU)
+}
+
+impl Estimator for MlRefine {
+    type Model = FrfModel;
+    type Start = ChainModel;
+    type Report = MlReport;
+    type Error = MlError;
+
+    fn estimate<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        start: ChainModel,
+    ) -> Result<Fit<FrfModel, MlReport>, MlError> {
+        let t0 = Instant::now();
+        let cfg = &self.config;
+        let mut model = start.model;
+        if data.ny() != model.ny() || data.nu() != model.nu() {
+            return Err(MlError::invalid(
+                "start model",
+                format!("{}x{}", model.ny(), model.nu()),
+                format!("the data are {}x{}", data.ny(), data.nu()),
+            ));
+        }
+        model.validate()?;
+        let mut messages = Vec::new();
+        // the start: stable poles, pairs above the real axis
+        for p in &mut model.modal.pairs {
+            if p.pole.im.is_nan() || p.pole.im <= 0.0 {
+                return Err(MlError::invalid(
+                    "start pole pair",
+                    p.pole,
+                    "the pole of a pair must have a positive imaginary part",
+                ));
+            }
+            if p.pole.re >= 0.0 {
+                let wn = p.pole.norm();
+                let z = cfg.zeta_unstable;
+                messages.push(format!(
+                    "start mode at {:.2} Hz has damping {:.3e} (not stable): started with damping {z}",
+                    wn / TAU,
+                    -p.pole.re / wn
+                ));
+                p.pole = C64::new(-z * wn, wn * (1.0 - z * z).sqrt());
+            }
+        }
+        for p in &mut model.modal.real_poles {
+            if p.pole >= 0.0 {
+                messages.push(format!(
+                    "start real pole at {:.3e} rad/s is not stable: reflected",
+                    p.pole
+                ));
+                p.pole = -p.pole.abs().max(1e-9);
+            }
+        }
+        let weighting = cfg.weighting.resolve(data);
+        let measured = matches!(weighting, Weighting::InverseVariance);
+        let w = weighting.weights(data)?;
+        let sw: Vec<f64> = w.iter().map(|x| (2.0 * x).sqrt()).collect();
+        let const_num = match cfg.residues {
+            ResidueForm::Complex => false,
+            ResidueForm::ConstantNumerator => true,
+            ResidueForm::Auto => {
+                !model.modal.pairs.is_empty()
+                    && model.modal.pairs.iter().all(|p| {
+                        let mut mx: f64 = 0.0;
+                        let mut re: f64 = 0.0;
+                        for j in 0..model.nu() {
+                            for i in 0..model.ny() {
+                                mx = mx.max(p.residue[(i, j)].norm());
+                                re = re.max(p.residue[(i, j)].re.abs());
+                            }
+                        }
+                        re <= 1e-9 * mx
+                    })
+            }
+        };
+        let has_d = (0..model.ny())
+            .any(|i| (0..model.nu()).any(|j| model.modal.feedthrough[(i, j)] != 0.0));
+        let lay = Layout {
+            ny: model.ny(),
+            nu: model.nu(),
+            n_pairs: model.modal.pairs.len(),
+            n_real: model.modal.real_poles.len(),
+            n_rigid: model.modal.rigid.len(),
+            feedthrough: cfg.feedthrough.unwrap_or(has_d),
+            crosstalk: model.factors.crosstalk.is_some(),
+            delay: model.factors.delay_fitted,
+            dynamics: model
+                .factors
+                .dynamics
+                .iter()
+                .map(|d| (d.den.len(), d.num.len()))
+                .collect(),
+            const_num,
+        };
+        let (n, m) = (data.n_lines(), lay.m());
+        let n_params = lay.n_nl() + m * lay.n_lin();
+        if lay.n_lin() == 0 {
+            return Err(MlError::invalid(
+                "start model",
+                "no terms",
+                "the model has no poles, rigid body or feedthrough to refine",
+            ));
+        }
+        if 2 * n < lay.n_lin() + lay.n_nl() + 1 || 2 * n * m <= n_params {
+            return Err(MlError::TooFewData {
+                observations: 2 * n * m,
+                params: n_params,
+            });
+        }
+        // the nonlinear start vector
+        let mut theta = Vec::with_capacity(lay.n_nl());
+        for p in &model.modal.pairs {
+            theta.push(p.pole.re);
+            theta.push(p.pole.im);
+        }
+        theta.extend(model.modal.real_poles.iter().map(|p| p.pole));
+        if lay.delay {
+            theta.push(model.factors.delay_s);
+        }
+        for d in &model.factors.dynamics {
+            theta.extend_from_slice(&d.den);
+            theta.extend_from_slice(&d.num);
+        }
+        let prob = Problem::new(
+            lay.clone(),
+            data.omegas(),
+            data.values_vec(),
+            sw,
+            model.clone(),
+        );
+        let eval0 = prob.evaluate(&theta).map_err(|s| MlError::Unidentifiable {
+            what: format!(
+                "linear term {} of entry ({}, {}) at the start (it is a combination of the others to {:.1e})",
+                s.column,
+                s.entry % lay.ny + 1,
+                s.entry / lay.ny + 1,
+                s.ratio
+            ),
+            condition: if s.ratio > 0.0 { 1.0 / s.ratio } else { f64::INFINITY },
+            hint: "drop one of two coinciding poles, or a rigid-body or feedthrough term the band does not show".into(),
+        })?;
+        let valid = |np: usize| {
+            move |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0)
+        };
+        let t_iter = Instant::now();
+        let mut out = iterate(
+            &prob,
+            theta,
+            eval0,
+            &cfg.lm,
+            valid(lay.n_pairs),
+            &cfg.progress,
+        );
+        let mut prob = prob;
+        let mut lay = lay;
+        let mut n_params = n_params;
+        let mut added = Vec::new();
+        // structure adaptation: a mode the start missed leaves a resonance in the residual
+        // that the cost test rejects; add a mode at its peak and keep it when it explains
+        // more than noise (F test, floor `min_f`)
+        while measured && added.len() < cfg.add_modes && out.convergence.is_converged() {
+            let dof = (n * m) as f64 - n_params as f64 / 2.0;
+            let p = chi2_upper_tail(2.0 * out.eval.cost, 2.0 * dof);
+            // a variance from R realizations alone raises the ratio to (R-1)/(R-2)
+            // (2 for R = 3): only a ratio beyond twice the expected one calls for a mode
+            let expected = expected_ratio(cfg.realizations);
+            if p >= 1e-3 || out.eval.cost / dof <= 2.0 * expected {
+                break;
+            }
+            let Some(f_new) = residual_peak(&prob, &out.theta, &out.eval.coef, &w) else {
+                break;
+            };
+            let mut lay2 = lay.clone();
+            lay2.n_pairs += 1;
+            let n_params2 = lay2.n_nl() + m * lay2.n_lin();
+            if 2 * n < lay2.n_lin() + lay2.n_nl() + 1 || 2 * n * m <= n_params2 {
+                break;
+            }
+            let np = lay.n_pairs;
+            let wn = TAU * f_new;
+            let z0 = 0.01;
+            let mut theta2 = out.theta[..2 * np].to_vec();
+            theta2.extend([-z0 * wn, wn * (1.0 - z0 * z0).sqrt()]);
+            theta2.extend_from_slice(&out.theta[2 * np..]);
+            let prob2 = Problem::new(
+                lay2.clone(),
+                prob.omega.clone(),
+                prob.g.clone(),
+                prob.sw.clone(),
+                model.clone(),
+            );
+            let Ok(ev2) = prob2.evaluate(&theta2) else {
+                break;
+            };
+            let out2 = iterate(
+                &prob2,
+                theta2,
+                ev2,
+                &cfg.lm,
+                valid(lay2.n_pairs),
+                &cfg.progress,
+            );
+            let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
+            let f_stat = ((out.eval.cost - out2.eval.cost) / ((n_params2 - n_params) as f64 / 2.0))
+                / (out2.eval.cost / dof2);
+            if f_stat.is_nan() || f_stat <= cfg.min_f || !out2.convergence.is_converged() {
+                messages.push(format!(
+                    "a mode added at {f_new:.2} Hz (the residual's peak) did not explain more than noise (F = {f_stat:.1}): not kept"
+                ));
+                break;
+            }
+            messages.push(format!(
+                "mode added at {f_new:.2} Hz (the residual's peak; the start missed it): cost {:.4e} -> {:.4e}, F = {f_stat:.1}",
+                out.eval.cost, out2.eval.cost
+            ));
+            added.push(f_new);
+            prob = prob2;
+            lay = lay2;
+            n_params = n_params2;
+            out = out2;
+        }
+        let np = lay.n_pairs;
+        let iter_time = t_iter.elapsed();
+        let fitted = prob.model(&out.theta, &out.eval.coef);
+        // unstable optimum
+        let mut bad = Vec::new();
+        for p in &fitted.modal.pairs {
+            if p.pole.re >= 0.0 {
+                bad.push(format!(
+                    "mode at {:.3} Hz with damping {:.3e}",
+                    p.f_hz(),
+                    p.zeta()
+                ));
+            }
+        }
+        for p in &fitted.modal.real_poles {
+            if p.pole >= 0.0 {
+                bad.push(format!("real pole at {:.3e} rad/s", p.pole));
+            }
+        }
+        for (k, d) in fitted.factors.dynamics.iter().enumerate() {
+            if !d.is_stable() {
+                bad.push(format!("dynamics factor {k} ({:?})", d.target));
+            }
+        }
+        if !bad.is_empty() {
+            return Err(MlError::Unstable {
+                poles: bad.join(", "),
+                hint: "start from another initialiser (--init), drop the mode from the start (--modes), or narrow the band to where the mode is excited".into(),
+            });
+        }
+        // statistics
+        let dof = (n * m) as f64 - n_params as f64 / 2.0;
+        let cost = out.eval.cost;
+        let ratio = cost / dof;
+        let (expected, p_value) = if measured {
+            match cfg.realizations {
+                Some(r) if r >= 4 => {
+                    let d2 = 2.0 * (r as f64 - 1.0);
+                    let mu = d2 / (d2 - 2.0);
+                    let var = d2.powi(3) / ((d2 - 2.0).powi(2) * (d2 - 4.0));
+                    (
+                        mu,
+                        Some(normal_upper_tail((ratio - mu) / (var / dof).sqrt())),
+                    )
+                }
+                _ => (1.0, Some(chi2_upper_tail(2.0 * cost, 2.0 * dof))),
+            }
+        } else {
+            (1.0, None)
+        };
+        let scale = match (cfg.covariance, measured) {
+            (CovarianceScale::Fisher, _) => 1.0,
+            (CovarianceScale::CostRatio, _) | (CovarianceScale::Auto, false) => ratio,
+            (CovarianceScale::Auto, true) => ratio.max(1.0),
+        };
+        let n_nl = lay.n_nl();
+        let (cov, cond, weakest) =
+            covariance(&out.r, n_nl, &out.vnorm).map_err(|_| MlError::Unidentifiable {
+                what: "the information matrix could not be factorised".into(),
+                condition: f64::INFINITY,
+                hint: "check the data for non-finite values".into(),
+            })?;
+        if n_nl > 0 && (cond.is_nan() || cond > cfg.max_condition) {
+            return Err(MlError::Unidentifiable {
+                what: describe_param(&lay, &out.theta, weakest, &fitted),
+                condition: cond,
+                hint: "drop the mode or term from the start, fix the delay (--delay SECONDS), or widen the band".into(),
+            });
+        }
+        let c = |a: usize, b: usize| cov[b * n_nl + a] * scale;
+        let modes = (0..np)
+            .map(|q| {
+                let (a, b) = (out.theta[2 * q], out.theta[2 * q + 1]);
+                let r = (a * a + b * b).sqrt();
+                // f = r / 2 pi, zeta = -a / r
+                let gf = [a / (r * TAU), b / (r * TAU)];
+                let gz = [-b * b / (r * r * r), a * b / (r * r * r)];
+                let quad = |g: [f64; 2]| {
+                    let (i, j) = (2 * q, 2 * q + 1);
+                    (g[0] * g[0] * c(i, i) + 2.0 * g[0] * g[1] * c(i, j) + g[1] * g[1] * c(j, j))
+                        .max(0.0)
+                        .sqrt()
+                };
+                ModeUncertainty {
+                    f_hz: r / TAU,
+                    f_hz_std: quad(gf),
+                    zeta: -a / r,
+                    zeta_std: quad(gz),
+                }
+            })
+            .collect();
+        let (delay_s, delay_s_std) = match lay.delay_index() {
+            Some(i) => (Some(out.theta[i]), Some(c(i, i).max(0.0).sqrt())),
+            None => (None, None),
+        };
+        if !out.convergence.is_converged() {
+            messages.push(format!(
+                "ML refinement {}: the uncertainty holds at an optimum only; try more iterations, a start from another initialiser, or fewer modes",
+                out.convergence.describe()
+            ));
+        }
+        if measured {
+            if let Some(p) = p_value {
+                if p < 1e-3 {
+                    messages.push(format!(
+                        "cost test: V/N_dof = {ratio:.3} (expected {expected:.3}, p = {p:.1e}): the residual exceeds the noise model (model error, or a variance estimated from few realizations); the standard deviations are scaled by sqrt({scale:.3})"
+                    ));
+                }
+            }
+        } else {
+            messages.push(format!(
+                "no measured variance: weighted least squares ({}), the noise scale estimated from the residual (V/N_dof = {ratio:.3e}) scales the covariance",
+                weighting.name()
+            ));
+        }
+        let report = MlReport {
+            weighting: weighting.name().to_string(),
+            noise: if measured {
+                "measured variance".into()
+            } else {
+                "estimated from the residual".into()
+            },
+            residue_form: if const_num {
+                "constant_numerator".into()
+            } else {
+                "complex".into()
+            },
+            n_nonlinear: n_nl,
+            n_params,
+            n_observations: 2 * n * m,
+            iterations: out.iterations,
+            cost_history: out.cost_history.clone(),
+            converged: out.convergence.is_converged(),
+            convergence: out.convergence.describe(),
+            cost,
+            dof,
+            cost_ratio: ratio,
+            expected_ratio: expected,
+            p_value,
+            covariance_scale: scale,
+            information_condition: cond,
+            modes,
+            delay_s,
+            delay_s_std,
+            added_modes_hz: added,
+        };
+        let mut fit = Fit {
+            model: fitted,
+            report,
+            cost_history: out.cost_history,
+            iterations: out.iterations,
+            convergence: out.convergence,
+            timings: Vec::new(),
+            estimator: format!(
+                "maximum likelihood, Levenberg-Marquardt with variable projection ({})",
+                weighting.name()
+            ),
+            messages,
+        };
+        fit.push_timing("iterations", iter_time);
+        fit.push_timing("total", t0.elapsed());
+        if let Convergence::Failed { .. } = fit.convergence {
+            fit.messages
+                .push("the iterations failed: see the convergence reason".into());
+        }
+        Ok(fit)
+    }
+}

@@ -1,0 +1,664 @@
+//! Variable projection for the model currency: the residues, the rigid body, the
+//! feedthrough and the crosstalk enter each entry of `P` linearly, so for fixed poles,
+//! delay and dynamics factors they are the solution of one small weighted linear
+//! least-squares problem per entry; the Gauss-Newton / Levenberg-Marquardt iterations
+//! run on the few nonlinear parameters only (Golub and Pereyra; the Jacobian of the
+//! reduced problem in Kaufman's form, `J = (I - P_A) dA/dtheta c`).
+//!
+//! Each entry's problem is factorised once per evaluation by a Householder QR of
+//! `[A_e | dA_e c_e | y_e]` (rows: real and imaginary parts of every line, weighted by
+//! `sqrt(2 w)`): the lower-right block of its `R` is the `R` factor of the projected
+//! Jacobian and residual of that entry, and the blocks of all entries are merged by one
+//! more QR. The work is linear in lines and in entries, and no normal equations are
+//! formed. With the full Jacobian `[J_nl | blockdiag(A_e)]`, the Schur complement of
+//! the linear block is exactly `sum_e J_e^T J_e`: the inverse of the merged `R^T R` is the
+//! marginal covariance of the nonlinear parameters (McKelvey eq. (31)-(32) with the
+//! measured variance as the fixed noise model).
+
+use crate::basis::{first_order, powers, rigid_bases, zoh_ts};
+use crate::qr::{back_substitute, householder_r};
+use crate::C64;
+use rayon::prelude::*;
+use realize::{FrfModel, PolePair, RealPole};
+use serde::{Deserialize, Serialize};
+
+/// How the residues of a pole pair are parametrised.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResidueForm {
+    /// A constant real numerator per entry, `B / (s^2 + 2 zeta wn s + wn^2)` (the mode
+    /// of eq. (26) of the wafer-stage paper) when every start residue is purely
+    /// imaginary (which that form gives), general complex residues otherwise. The
+    /// default.
+    #[default]
+    Auto,
+    /// A complex residue per entry: `R / (s - p) + conj(R) / (s - conj p)` (2 real
+    /// parameters per entry and mode).
+    Complex,
+    /// A real numerator per entry: `B / ((s - p)(s - conj p))` (1 real parameter per
+    /// entry and mode; the residue is `B / (2 j Im p)`).
+    ConstantNumerator,
+}
+
+/// The structure of the refined model: which terms it has and how they are
+/// parametrised.
+#[derive(Debug, Clone)]
+pub(crate) struct Layout {
+    pub ny: usize,
+    pub nu: usize,
+    pub n_pairs: usize,
+    pub n_real: usize,
+    pub n_rigid: usize,
+    pub feedthrough: bool,
+    pub crosstalk: bool,
+    pub delay: bool,
+    /// `(den.len(), num.len())` per dynamics factor.
+    pub dynamics: Vec<(usize, usize)>,
+    /// True for [`ResidueForm::ConstantNumerator`].
+    pub const_num: bool,
+}
+
+impl Layout {
+    pub fn m(&self) -> usize {
+        self.ny * self.nu
+    }
+    /// Linear columns per pair.
+    pub fn cpp(&self) -> usize {
+        if self.const_num {
+            1
+        } else {
+            2
+        }
+    }
+    /// Linear columns multiplied by the scalar factor `F` (all but the crosstalk).
+    pub fn n_lc(&self) -> usize {
+        self.n_pairs * self.cpp() + self.n_real + self.n_rigid + usize::from(self.feedthrough)
+    }
+    /// Linear parameters per entry.
+    pub fn n_lin(&self) -> usize {
+        self.n_lc() + usize::from(self.crosstalk)
+    }
+    /// Nonlinear parameters.
+    pub fn n_nl(&self) -> usize {
+        2 * self.n_pairs
+            + self.n_real
+            + usize::from(self.delay)
+            + self.dynamics.iter().map(|(a, b)| a + b).sum::<usize>()
+    }
+    /// Index of the delay in the nonlinear vector.
+    pub fn delay_index(&self) -> Option<usize> {
+        self.delay.then_some(2 * self.n_pairs + self.n_real)
+    }
+}
+
+/// The refinement problem: data, weights and structure.
+pub(crate) struct Problem {
+    pub lay: Layout,
+    pub omega: Vec<f64>,
+    /// Data, line after line, each line `vec(G)`.
+    pub g: Vec<C64>,
+    /// `sqrt(2 w)` per line and entry.
+    pub sw: Vec<f64>,
+    /// The model whose known factors (hold, derivative order, dynamics targets and
+    /// scales) the refined model keeps.
+    pub template: FrfModel,
+    pub ts: Option<f64>,
+    /// Rigid-body bases, `N x n_rigid` (fixed).
+    rigid: Vec<C64>,
+}
+
+/// The per-line values of the bases for one nonlinear parameter vector.
+struct Lines {
+    /// `F phi_l`, `N x n_lc`.
+    fphi: Vec<C64>,
+    /// `F d phi / d (Re p, Im p)` per pair and column: index
+    /// `((k * n_pairs + q) * 2 + ab) * cpp + c`.
+    dpair: Vec<C64>,
+    /// `F d phi / d p` per real pole, `N x n_real`.
+    dreal: Vec<C64>,
+    /// Per dynamics factor and line: `(B/A, A)`, index `k * n_dyn + d`.
+    dynv: Vec<(C64, C64)>,
+    /// Per dynamics factor, line-major: `x^1..x^n` with `n = max(den, num)`.
+    dynx: Vec<Vec<C64>>,
+}
+
+/// The cost and the linear parameters at one nonlinear parameter vector.
+#[derive(Clone)]
+pub(crate) struct Eval {
+    /// `sum_k sum_e w |G - P|^2` (half the squared norm of the scaled residual).
+    pub cost: f64,
+    /// Linear parameters, `m x n_lin`, entry-major.
+    pub coef: Vec<f64>,
+}
+
+/// A linear problem without a unique solution (a basis column of entry `entry` is in
+/// the span of the others).
+#[derive(Debug, Clone)]
+pub(crate) struct Singular {
+    pub entry: usize,
+    pub column: usize,
+    pub ratio: f64,
+}
+
+impl Problem {
+    pub fn new(
+        lay: Layout,
+        omega: Vec<f64>,
+        g: Vec<C64>,
+        sw: Vec<f64>,
+        template: FrfModel,
+    ) -> Self {
+        let ts = zoh_ts(&template);
+        let mut rigid = Vec::with_capacity(omega.len() * lay.n_rigid);
+        let mut rb = Vec::new();
+        for &w in &omega {
+            rigid_bases(lay.n_rigid, w, ts, &mut rb);
+            rigid.extend_from_slice(&rb);
+        }
+        Self {
+            lay,
+            omega,
+            g,
+            sw,
+            template,
+            ts,
+            rigid,
+        }
+    }
+
+    pub fn n_lines(&self) -> usize {
+        self.omega.len()
+    }
+
+    /// The template's factors with the delay and dynamics coefficients of `theta`.
+    fn factors(&self, theta: &[f64]) -> realize::KnownFactors {
+        let lay = &self.lay;
+        let mut f = self.template.factors.clone();
+        if let Some(i) = lay.delay_index() {
+            f.delay_s = theta[i];
+        }
+        let mut off = 2 * lay.n_pairs + lay.n_real + usize::from(lay.delay);
+        for d in &mut f.dynamics {
+            for v in d.den.iter_mut().chain(d.num.iter_mut()) {
+                *v = theta[off];
+                off += 1;
+            }
+        }
+        f
+    }
+
+    fn lines(&self, theta: &[f64]) -> Lines {
+        let lay = &self.lay;
+        let (n, n_lc, cpp, np) = (self.n_lines(), lay.n_lc(), lay.cpp(), lay.n_pairs);
+        let f = self.factors(theta);
+        let nd = f.dynamics.len();
+        let mut fphi = vec![C64::new(0.0, 0.0); n * n_lc];
+        let mut dpair = vec![C64::new(0.0, 0.0); n * np * 2 * cpp];
+        let mut dreal = vec![C64::new(0.0, 0.0); n * lay.n_real];
+        let mut dynv = Vec::with_capacity(n * nd);
+        let mut dynx: Vec<Vec<C64>> = vec![Vec::new(); nd];
+        let j = C64::new(0.0, 1.0);
+        for (k, &w) in self.omega.iter().enumerate() {
+            let fs = f.scalar_at(w);
+            let row = &mut fphi[k * n_lc..(k + 1) * n_lc];
+            let mut col = 0;
+            for q in 0..np {
+                let p = C64::new(theta[2 * q], theta[2 * q + 1]);
+                let (h, dh) = first_order(p, w, self.ts);
+                let (hc, dhc) = first_order(p.conj(), w, self.ts);
+                let base = (k * np + q) * 2 * cpp;
+                if lay.const_num {
+                    let b = p.im;
+                    let phi = (h - hc) / (2.0 * j * b);
+                    row[col] = fs * phi;
+                    dpair[base] = fs * (dh - dhc) / (2.0 * j * b);
+                    dpair[base + 1] = fs * ((dh + dhc) / (2.0 * b) - phi / b);
+                    col += 1;
+                } else {
+                    row[col] = fs * (h + hc);
+                    row[col + 1] = fs * j * (h - hc);
+                    dpair[base] = fs * (dh + dhc);
+                    dpair[base + 1] = fs * j * (dh - dhc);
+                    dpair[base + 2] = fs * j * (dh - dhc);
+                    dpair[base + 3] = -fs * (dh + dhc);
+                    col += 2;
+                }
+            }
+            for r in 0..lay.n_real {
+                let p = theta[2 * np + r];
+                let (h, dh) = first_order(C64::new(p, 0.0), w, self.ts);
+                row[col] = fs * h;
+                dreal[k * lay.n_real + r] = fs * dh;
+                col += 1;
+            }
+            for l in 0..lay.n_rigid {
+                row[col] = fs * self.rigid[k * lay.n_rigid + l];
+                col += 1;
+            }
+            if lay.feedthrough {
+                row[col] = fs;
+            }
+            for (di, d) in f.dynamics.iter().enumerate() {
+                dynv.push((d.at(w), d.den_at(w)));
+                let x = C64::new(0.0, w / d.scale);
+                dynx[di].extend(powers(x, d.den.len().max(d.num.len())));
+            }
+        }
+        Lines {
+            fphi,
+            dpair,
+            dreal,
+            dynv,
+            dynx,
+        }
+    }
+
+    /// The product of the dynamics factors of entry `e` at line `k`, leaving out factor
+    /// `skip`.
+    fn dprod(&self, lines: &Lines, k: usize, e: usize, skip: Option<usize>) -> C64 {
+        let ny = self.lay.ny;
+        let (i, jj) = (e % ny, e / ny);
+        let nd = self.template.factors.dynamics.len();
+        let mut v = C64::new(1.0, 0.0);
+        for (di, d) in self.template.factors.dynamics.iter().enumerate() {
+            if Some(di) != skip && d.affects(i, jj) {
+                v *= lines.dynv[k * nd + di].0;
+            }
+        }
+        v
+    }
+
+    /// Writes the weighted basis of entry `e` (`2N x n_lin`, column-major with
+    /// `rows = 2N`) into `a[..]` and the weighted data into column `ycol`.
+    fn fill_basis(&self, lines: &Lines, e: usize, a: &mut [f64], ycol: usize) {
+        let lay = &self.lay;
+        let (n, m, n_lc) = (self.n_lines(), lay.m(), lay.n_lc());
+        let rows = 2 * n;
+        for k in 0..n {
+            let s = self.sw[k * m + e];
+            let d = self.dprod(lines, k, e, None) * s;
+            for l in 0..n_lc {
+                let v = d * lines.fphi[k * n_lc + l];
+                a[l * rows + 2 * k] = v.re;
+                a[l * rows + 2 * k + 1] = v.im;
+            }
+            if lay.crosstalk {
+                a[n_lc * rows + 2 * k] = d.re;
+                a[n_lc * rows + 2 * k + 1] = d.im;
+            }
+            let y = self.g[k * m + e] * s;
+            a[ycol * rows + 2 * k] = y.re;
+            a[ycol * rows + 2 * k + 1] = y.im;
+        }
+    }
+
+    /// Solves the linear problem of every entry at `theta`: the cost and the linear
+    /// parameters, or the first entry whose basis is (numerically) rank deficient.
+    pub fn evaluate(&self, theta: &[f64]) -> Result<Eval, Singular> {
+        let lines = self.lines(theta);
+        let lay = &self.lay;
+        let (m, n_lin) = (lay.m(), lay.n_lin());
+        let rows = 2 * self.n_lines();
+        let per: Vec<Result<(f64, Vec<f64>), Singular>> = (0..m)
+            .into_par_iter()
+            .map(|e| {
+                let cols = n_lin + 1;
+                let mut a = vec![0.0; rows * cols];
+                self.fill_basis(&lines, e, &mut a, n_lin);
+                let norms: Vec<f64> = (0..n_lin)
+                    .map(|l| {
+                        a[l * rows..(l + 1) * rows]
+                            .iter()
+                            .map(|x| x * x)
+                            .sum::<f64>()
+                            .sqrt()
+                    })
+                    .collect();
+                householder_r(&mut a, rows, cols);
+                for (l, &nl) in norms.iter().enumerate() {
+                    let r = a[l * rows + l].abs();
+                    let ratio = if nl > 0.0 { r / nl } else { 0.0 };
+                    if ratio.is_nan() || ratio <= 1e-11 {
+                        return Err(Singular {
+                            entry: e,
+                            column: l,
+                            ratio,
+                        });
+                    }
+                }
+                let mut c: Vec<f64> = (0..n_lin).map(|i| a[n_lin * rows + i]).collect();
+                back_substitute(&a, rows, 0, n_lin, &mut c);
+                let rr = a[n_lin * rows + n_lin];
+                Ok((0.5 * rr * rr, c))
+            })
+            .collect();
+        let mut cost = 0.0;
+        let mut coef = Vec::with_capacity(m * n_lin);
+        for r in per {
+            let (c2, c) = r?;
+            cost += c2;
+            coef.extend(c);
+        }
+        Ok(Eval { cost, coef })
+    }
+
+    /// The `R` factor (`(n_nl + 1)^2`, column-major) of the projected Jacobian and
+    /// residual `[J | r]` of all entries at `theta`, whose linear parameters `ev` holds,
+    /// and the norms of the Jacobian's columns before the projection (a column that the
+    /// projection almost cancels belongs to a parameter the linear terms can imitate).
+    pub fn jacobian_r(&self, theta: &[f64], ev: &Eval) -> (Vec<f64>, Vec<f64>) {
+        let lines = self.lines(theta);
+        let lay = &self.lay;
+        let (n, m, n_lin, n_lc, n_nl) =
+            (self.n_lines(), lay.m(), lay.n_lin(), lay.n_lc(), lay.n_nl());
+        let (np, cpp) = (lay.n_pairs, lay.cpp());
+        let rows = 2 * n;
+        let nb = n_nl + 1;
+        let f = self.factors(theta);
+        let blocks: Vec<(Vec<f64>, Vec<f64>)> = (0..m)
+            .into_par_iter()
+            .map(|e| {
+                let cols = n_lin + n_nl + 1;
+                let mut a = vec![0.0; rows * cols];
+                let ycol = n_lin + n_nl;
+                self.fill_basis(&lines, e, &mut a, ycol);
+                let c = &ev.coef[e * n_lin..(e + 1) * n_lin];
+                let (i_out, j_in) = (e % lay.ny, e / lay.ny);
+                for k in 0..n {
+                    let s = self.sw[k * m + e];
+                    let d = self.dprod(&lines, k, e, None) * s;
+                    let mut put = |col: usize, v: C64| {
+                        a[(n_lin + col) * rows + 2 * k] = v.re;
+                        a[(n_lin + col) * rows + 2 * k + 1] = v.im;
+                    };
+                    for q in 0..np {
+                        for ab in 0..2 {
+                            let base = ((k * np + q) * 2 + ab) * cpp;
+                            let mut v = C64::new(0.0, 0.0);
+                            for cc in 0..cpp {
+                                v += lines.dpair[base + cc] * c[q * cpp + cc];
+                            }
+                            put(2 * q + ab, d * v);
+                        }
+                    }
+                    for r in 0..lay.n_real {
+                        let v = lines.dreal[k * lay.n_real + r] * c[np * cpp + r];
+                        put(2 * np + r, d * v);
+                    }
+                    if lay.delay || !lay.dynamics.is_empty() {
+                        let mut fr = C64::new(0.0, 0.0);
+                        for l in 0..n_lc {
+                            fr += lines.fphi[k * n_lc + l] * c[l];
+                        }
+                        let mut col = 2 * np + lay.n_real;
+                        if lay.delay {
+                            put(col, C64::new(0.0, -self.omega[k]) * d * fr);
+                            col += 1;
+                        }
+                        let inner = fr + if lay.crosstalk { c[n_lc] } else { 0.0 };
+                        let nd = f.dynamics.len();
+                        for (di, df) in f.dynamics.iter().enumerate() {
+                            let (nden, nnum) = (df.den.len(), df.num.len());
+                            if df.affects(i_out, j_in) {
+                                let (hd, ad) = lines.dynv[k * nd + di];
+                                let rest = self.dprod(&lines, k, e, Some(di)) * inner * s;
+                                let npow = nden.max(nnum);
+                                let xs = &lines.dynx[di][k * npow..(k + 1) * npow];
+                                for ci in 0..nden {
+                                    put(col + ci, -rest * hd * xs[ci] / ad);
+                                }
+                                for ci in 0..nnum {
+                                    put(col + nden + ci, rest * xs[ci] / ad);
+                                }
+                            }
+                            col += nden + nnum;
+                        }
+                    }
+                }
+                let vn: Vec<f64> = (0..n_nl)
+                    .map(|c| {
+                        a[(n_lin + c) * rows..(n_lin + c + 1) * rows]
+                            .iter()
+                            .map(|x| x * x)
+                            .sum()
+                    })
+                    .collect();
+                householder_r(&mut a, rows, cols);
+                // the lower-right block: R of the projected [J | r]
+                let mut b = vec![0.0; nb * nb];
+                for cj in 0..nb {
+                    for ri in 0..=cj.min(rows.saturating_sub(n_lin + 1)) {
+                        b[cj * nb + ri] = a[(n_lin + cj) * rows + n_lin + ri];
+                    }
+                }
+                (b, vn)
+            })
+            .collect();
+        let mut vnorm = vec![0.0; n_nl];
+        // merge: stack the blocks and factorise once more
+        let srows = m * nb;
+        let mut s = vec![0.0; srows * nb];
+        for (e, (b, vn)) in blocks.iter().enumerate() {
+            for (acc, v) in vnorm.iter_mut().zip(vn) {
+                *acc += v;
+            }
+            for cj in 0..nb {
+                for ri in 0..nb {
+                    s[cj * srows + e * nb + ri] = b[cj * nb + ri];
+                }
+            }
+        }
+        householder_r(&mut s, srows, nb);
+        let mut r = vec![0.0; nb * nb];
+        for cj in 0..nb {
+            for ri in 0..=cj {
+                r[cj * nb + ri] = s[cj * srows + ri];
+            }
+        }
+        (r, vnorm.into_iter().map(f64::sqrt).collect())
+    }
+
+    /// The model at `theta` with the linear parameters `coef`.
+    pub fn model(&self, theta: &[f64], coef: &[f64]) -> FrfModel {
+        let lay = &self.lay;
+        let (ny, nu, m, n_lin, n_lc, cpp) =
+            (lay.ny, lay.nu, lay.m(), lay.n_lin(), lay.n_lc(), lay.cpp());
+        let mut fm = self.template.clone();
+        fm.factors = self.factors(theta);
+        let cf = |e: usize, l: usize| coef[e * n_lin + l];
+        fm.modal.pairs = (0..lay.n_pairs)
+            .map(|q| {
+                let pole = C64::new(theta[2 * q], theta[2 * q + 1]);
+                let residue = faer::Mat::from_fn(ny, nu, |i, j| {
+                    let e = j * ny + i;
+                    if lay.const_num {
+                        C64::new(0.0, -cf(e, q) / (2.0 * pole.im))
+                    } else {
+                        C64::new(cf(e, 2 * q), cf(e, 2 * q + 1))
+                    }
+                });
+                PolePair { pole, residue }
+            })
+            .collect();
+        let off = lay.n_pairs * cpp;
+        fm.modal.real_poles = (0..lay.n_real)
+            .map(|r| RealPole {
+                pole: theta[2 * lay.n_pairs + r],
+                residue: faer::Mat::from_fn(ny, nu, |i, j| cf(j * ny + i, off + r)),
+            })
+            .collect();
+        let off = off + lay.n_real;
+        fm.modal.rigid = (0..lay.n_rigid)
+            .map(|l| faer::Mat::from_fn(ny, nu, |i, j| cf(j * ny + i, off + l)))
+            .collect();
+        let off = off + lay.n_rigid;
+        fm.modal.feedthrough = if lay.feedthrough {
+            faer::Mat::from_fn(ny, nu, |i, j| cf(j * ny + i, off))
+        } else {
+            faer::Mat::zeros(ny, nu)
+        };
+        if lay.crosstalk {
+            fm.factors.crosstalk = Some(faer::Mat::from_fn(ny, nu, |i, j| cf(j * ny + i, n_lc)));
+        }
+        debug_assert_eq!(m * n_lin, coef.len());
+        fm
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realize::ModalModel;
+
+    /// The scaled residual vector at `theta` (linear parameters eliminated).
+    fn residual(p: &Problem, theta: &[f64]) -> Vec<f64> {
+        let ev = p.evaluate(theta).unwrap();
+        let fm = p.model(theta, &ev.coef);
+        let g = fm.freq_response(&p.omega).unwrap();
+        let m = p.lay.m();
+        let mut r = Vec::new();
+        for e in 0..m {
+            for k in 0..p.omega.len() {
+                let v = (p.g[k * m + e] - g.values[k * m + e]) * p.sw[k * m + e];
+                r.push(v.re);
+                r.push(v.im);
+            }
+        }
+        r
+    }
+
+    #[test]
+    fn projected_jacobian_matches_finite_differences_at_zero_residual() {
+        for (const_num, delay, ts, small, dynx) in [
+            (false, true, None, true, false),
+            (false, true, None, false, false),
+            (true, true, None, false, false),
+            (false, false, Some(2.5e-4), false, false),
+            (true, true, Some(2.5e-4), false, false),
+            (false, true, None, false, true),
+            (true, false, Some(2.5e-4), false, true),
+        ] {
+            let ny = if small { 1 } else { 2 };
+            let mut mm = ModalModel::new(ny, 1);
+            mm.pairs.push(PolePair::from_f_zeta(
+                120.0,
+                0.02,
+                faer::Mat::from_fn(ny, 1, |i, _| {
+                    C64::new(if const_num { 0.0 } else { 0.3 }, -1.0 - i as f64)
+                }),
+            ));
+            if !small {
+                mm.pairs.push(PolePair::from_f_zeta(
+                    410.0,
+                    0.01,
+                    faer::Mat::from_fn(ny, 1, |i, _| {
+                        C64::new(if const_num { 0.0 } else { -0.1 }, 2.0 + i as f64)
+                    }),
+                ));
+                mm.real_poles.push(RealPole {
+                    pole: -900.0,
+                    residue: faer::Mat::from_fn(ny, 1, |i, _| 50.0 + i as f64),
+                });
+            }
+            let mut fm = FrfModel::new(mm);
+            fm.factors.delay_s = 1.5e-4;
+            fm.factors.delay_fitted = delay;
+            if let Some(t) = ts {
+                fm.factors.hold = realize::Hold::Zoh { fs_hz: 1.0 / t };
+            }
+            if dynx {
+                fm.factors
+                    .dynamics
+                    .push(realize::DynamicsFactor::second_order(
+                        realize::FactorTarget::Output(1),
+                        300.0,
+                        0.2,
+                    ));
+                let mut lead =
+                    realize::DynamicsFactor::first_order(realize::FactorTarget::All, 700.0);
+                lead.num = vec![0.3];
+                fm.factors.dynamics.push(lead);
+                fm.factors.crosstalk =
+                    Some(faer::Mat::from_fn(ny, 1, |i, _| 0.01 * (i as f64 + 1.0)));
+            }
+            let omega: Vec<f64> = (1..200)
+                .map(|k| 2.0 * std::f64::consts::PI * 5.0 * k as f64)
+                .collect();
+            let g = fm.freq_response(&omega).unwrap().values;
+            let lay = Layout {
+                ny,
+                nu: 1,
+                n_pairs: if small { 1 } else { 2 },
+                n_real: if small { 0 } else { 1 },
+                n_rigid: 0,
+                feedthrough: false,
+                crosstalk: dynx,
+                delay,
+                dynamics: if dynx { vec![(2, 0), (1, 1)] } else { vec![] },
+                const_num,
+            };
+            let sw: Vec<f64> = g.iter().map(|v| 2f64.sqrt() / v.norm()).collect();
+            let p = Problem::new(lay.clone(), omega, g, sw, fm.clone());
+            let mut theta = vec![fm.modal.pairs[0].pole.re, fm.modal.pairs[0].pole.im];
+            if !small {
+                theta.extend([fm.modal.pairs[1].pole.re, fm.modal.pairs[1].pole.im, -900.0]);
+            }
+            if delay {
+                theta.push(1.5e-4);
+            }
+            for d in &fm.factors.dynamics {
+                theta.extend_from_slice(&d.den);
+                theta.extend_from_slice(&d.num);
+            }
+            let n = theta.len();
+            if delay && !dynx {
+                // one Gauss-Newton step from a delay 1e-8 s off returns to the truth
+                let mut t1 = theta.clone();
+                t1[n - 1] += 1e-8;
+                let ev1 = p.evaluate(&t1).unwrap();
+                let (r1, _) = p.jacobian_r(&t1, &ev1);
+                let mut z: Vec<f64> = (0..n).map(|i| r1[n * (n + 1) + i]).collect();
+                crate::qr::back_substitute(&r1, n + 1, 0, n, &mut z);
+                let err = t1[n - 1] + z[n - 1] - theta[n - 1];
+                assert!(
+                    err.abs() < 1e-12,
+                    "{const_num} {ts:?}: GN step {:.3e}, left {err:.3e}",
+                    z[n - 1]
+                );
+            }
+            let ev = p.evaluate(&theta).unwrap();
+            assert!(ev.cost < 1e-20, "{}", ev.cost);
+            let (r, _) = p.jacobian_r(&theta, &ev);
+            let mut cols = Vec::new();
+            for i in 0..n {
+                let h = 1e-6 * theta[i].abs();
+                let mut tp = theta.clone();
+                tp[i] += h;
+                let mut tm = theta.clone();
+                tm[i] -= h;
+                let (a, b) = (residual(&p, &tp), residual(&p, &tm));
+                cols.push(
+                    a.iter()
+                        .zip(&b)
+                        .map(|(x, y)| -(x - y) / (2.0 * h))
+                        .collect::<Vec<f64>>(),
+                );
+            }
+            for a in 0..n {
+                for b in 0..n {
+                    let fd: f64 = cols[a].iter().zip(&cols[b]).map(|(x, y)| x * y).sum();
+                    let an: f64 = (0..n)
+                        .map(|i| r[a * (n + 1) + i] * r[b * (n + 1) + i])
+                        .sum();
+                    let scale = (cols[a].iter().map(|x| x * x).sum::<f64>()
+                        * cols[b].iter().map(|x| x * x).sum::<f64>())
+                    .sqrt();
+                    assert!(
+                        (fd - an).abs() <= 1e-6 * scale,
+                        "{const_num} {delay} {ts:?} ({a},{b}): fd {fd:.6e} vs R^T R {an:.6e}"
+                    );
+                }
+            }
+        }
+    }
+}
