@@ -1,0 +1,270 @@
+//! The Sanathanan-Koerner iterations for one common denominator of a MIMO FRF.
+//!
+//! Jue, eq. (2) and (4), McKelvey eq. (36)-(38): with the denominator `d_i` of the
+//! previous iteration fixed, the weighted equation error
+//!
+//! `e_ke(theta) = q_ke (G_ke d(x_k) - N_e(x_k)) / |d_i(x_k)|^g`
+//!
+//! is linear in the coefficients of `d` (shared by every entry `e`) and of the
+//! numerators `N_e` (one per entry), with `x_k` the basis variable at line `k`,
+//! `q_ke = sqrt(w_ke)` the data weight and `g = 1` (classic SK) or `g = 1/2` (Jue's
+//! default, section 2.2.3). The first iteration (`d_0 = 1`) is Levy's linearised fit.
+//! Real coefficients: every complex equation gives its real and imaginary part as two
+//! real rows.
+//!
+//! The numerators are eliminated per entry (variable projection): the QR factorisation
+//! of the entry's block `[A_N | A_D]` (2 L rows) leaves in its `R_22` block the
+//! denominator columns projected onto the orthogonal complement of the numerator
+//! columns, reduced to `n + 1` rows. The `R_22` blocks of all entries are stacked and
+//! the denominator is the right singular vector of the smallest singular value (the
+//! normalisation `||d|| = 1`). The cost of one iteration is linear in the entries and
+//! the lines: `m` QRs of `2 L x 2 (n + 1)` and one SVD of `m (n + 1) x (n + 1)`.
+
+use crate::{Prepared, SkError};
+use faer::Mat;
+use frf_data::Convergence;
+use poly_basis::{eval, Basis};
+use realize::C64;
+use serde::{Deserialize, Serialize};
+
+/// The SK weight on the previous denominator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SkWeight {
+    /// `1 / |d_i|`: the classic SK iteration, whose fixed point approximates the
+    /// weighted output-error criterion (the default).
+    #[default]
+    Classic,
+    /// `1 / sqrt|d_i|`: Jue's default (section 2.2.3), a more uniform fit that
+    /// de-emphasises the lightly damped modes.
+    Sqrt,
+}
+
+impl SkWeight {
+    fn exponent(self) -> f64 {
+        match self {
+            SkWeight::Classic => 1.0,
+            SkWeight::Sqrt => 0.5,
+        }
+    }
+}
+
+/// Iteration settings of [`sk_denominator`], with documented defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkIterConfig {
+    /// The SK weight. Default: [`SkWeight::Classic`].
+    pub weight: SkWeight,
+    /// Iterations after the Levy start, at most. Default: 30.
+    pub max_iter: usize,
+    /// Stop when the relative change of the SK cost between two iterations,
+    /// `|V_i - V_(i-1)| / V_i`, falls below this (the "relative cost" rule of Jue
+    /// section 2.2.3, which the thesis does not define further). Default: 1e-6.
+    pub cost_tol: f64,
+    /// Stop as converged when the SK cost is below this (an exact fit of noise-free
+    /// data, where the relative change is rounding noise). Default: 1e-22.
+    pub exact_tol: f64,
+}
+
+impl Default for SkIterConfig {
+    fn default() -> Self {
+        Self {
+            weight: SkWeight::Classic,
+            max_iter: 30,
+            cost_tol: 1e-6,
+            exact_tol: 1e-22,
+        }
+    }
+}
+
+/// The common denominator found by [`sk_denominator`].
+#[derive(Debug, Clone)]
+pub struct SkDenominator {
+    /// Coefficients of `d(x)` in the basis, ascending, `||d|| = 1`.
+    pub den: Vec<f64>,
+    /// The SK cost after the Levy start and each iteration: the sum of the squared
+    /// weighted equation errors (the smallest squared singular value) relative to the
+    /// same weighted sum of `|G d|^2`, so that it does not depend on the scale of the
+    /// weights `1/|d_prev|` and is 0 for an exact fit.
+    pub cost_history: Vec<f64>,
+    /// SK iterations after the Levy start.
+    pub iterations: usize,
+    /// Why the iterations stopped.
+    pub convergence: Convergence,
+    /// Condition of the reduced denominator problem of the last iteration:
+    /// `sigma_max / sigma_(n)` (the second smallest singular value: how well the
+    /// minimiser is separated).
+    pub ls_condition: f64,
+}
+
+/// The powers `x_k^j`, `j = 0..=n`, at every line (line-major).
+pub(crate) fn powers(basis: &Basis, omegas: &[f64], n: usize) -> Vec<C64> {
+    let mut phi = vec![C64::new(0.0, 0.0); omegas.len() * (n + 1)];
+    for (k, &w) in omegas.iter().enumerate() {
+        basis.powers_into(w, &mut phi[k * (n + 1)..(k + 1) * (n + 1)]);
+    }
+    phi
+}
+
+/// SK iterations for the order-`n` common denominator of `data` in `basis` (see the
+/// module documentation).
+pub fn sk_denominator(
+    data: &Prepared,
+    basis: &Basis,
+    n: usize,
+    cfg: &SkIterConfig,
+) -> Result<SkDenominator, SkError> {
+    let l = data.n_lines();
+    let m = data.m();
+    let nc = n + 1;
+    if l < n + 2 {
+        return Err(SkError::OrderExceedsData {
+            order: n,
+            lines: l,
+            max: l.saturating_sub(2),
+        });
+    }
+    let phi = powers(basis, &data.omegas, n);
+    let gamma = cfg.weight.exponent();
+    // |d_prev(x_k)|^-gamma, 1 for the Levy start
+    let mut skw = vec![1.0; l];
+    let mut block = Mat::<f64>::zeros(2 * l, 2 * nc);
+    let mut stacked = Mat::<f64>::zeros(m * nc, nc);
+    let mut history = Vec::new();
+    let mut den = vec![0.0; nc];
+    let mut ls_condition = f64::NAN;
+    let mut convergence = Convergence::MaxIterations {
+        limit: cfg.max_iter,
+    };
+    let mut iterations = 0;
+    for it in 0..=cfg.max_iter {
+        let mut used = 0;
+        for e in 0..m {
+            let mut any = false;
+            for k in 0..l {
+                let idx = k * m + e;
+                let q = data.w[idx].sqrt() * skw[k];
+                let g = data.g[idx] * q;
+                any |= q > 0.0;
+                let row = &phi[k * nc..(k + 1) * nc];
+                for (j, p) in row.iter().enumerate() {
+                    let a = p * q;
+                    block[(k, j)] = a.re;
+                    block[(l + k, j)] = a.im;
+                    let b = -(p * g);
+                    block[(k, nc + j)] = b.re;
+                    block[(l + k, nc + j)] = b.im;
+                }
+            }
+            if !any {
+                continue;
+            }
+            let qr = block.qr();
+            let r = qr.thin_R();
+            for i in 0..nc {
+                for j in 0..nc {
+                    stacked[(used * nc + i, j)] = if j >= i { r[(nc + i, nc + j)] } else { 0.0 };
+                }
+            }
+            used += 1;
+        }
+        if used == 0 {
+            return Err(SkError::numerical(
+                "SK iteration",
+                "every weight is zero: nothing to fit",
+            ));
+        }
+        let svd = stacked
+            .as_ref()
+            .subrows(0, used * nc)
+            .thin_svd()
+            .map_err(|e| SkError::numerical("SK denominator (SVD)", format!("{e:?}")))?;
+        let s = svd.S().column_vector();
+        let v = svd.V();
+        // faer sorts singular values in non-increasing order
+        let smin = s[nc - 1];
+        let cost = smin * smin;
+        ls_condition = if nc >= 2 && s[nc - 2] > 0.0 {
+            s[0] / s[nc - 2]
+        } else {
+            f64::INFINITY
+        };
+        for j in 0..nc {
+            den[j] = v[(j, nc - 1)];
+        }
+        if den.iter().any(|d| !d.is_finite()) || !cost.is_finite() {
+            return Err(SkError::numerical(
+                "SK denominator",
+                format!("non-finite coefficients at iteration {it}"),
+            ));
+        }
+        // sign: the largest coefficient positive (the same polynomial either way)
+        let jmax = (0..nc)
+            .max_by(|&a, &b| den[a].abs().total_cmp(&den[b].abs()))
+            .unwrap_or(0);
+        if den[jmax] < 0.0 {
+            den.iter_mut().for_each(|d| *d = -*d);
+        }
+        // relative to the weighted size of G d on the lines: scale-free across
+        // iterations (the weights 1/|d_prev| change scale) and 0 for an exact fit
+        let mut gd = 0.0;
+        for k in 0..l {
+            let d = eval(&den, phi[k * nc + 1]).norm_sqr() * skw[k] * skw[k];
+            for e in 0..m {
+                let idx = k * m + e;
+                gd += d * data.w[idx] * data.g[idx].norm_sqr();
+            }
+        }
+        let cost = cost / gd.max(f64::MIN_POSITIVE);
+        history.push(cost);
+        iterations = it;
+        if it > 0 {
+            if cost <= cfg.exact_tol {
+                convergence = Convergence::CostTolerance {
+                    relative_change: 0.0,
+                };
+                break;
+            }
+            let prev = history[history.len() - 2];
+            let rel = (cost - prev).abs() / cost.max(f64::MIN_POSITIVE);
+            if rel < cfg.cost_tol {
+                convergence = Convergence::CostTolerance {
+                    relative_change: rel,
+                };
+                break;
+            }
+        }
+        if std::env::var("SK_DEBUG").is_ok() {
+            let dv: Vec<f64> = (0..l).map(|k| eval(&den, phi[k * nc + 1]).norm()).collect();
+            let r = poly_basis::roots(&den).unwrap_or_default();
+            let rmax = r.iter().map(|z| z.norm()).fold(0.0, f64::max);
+            eprintln!(
+                "it {it}: cost {cost:.3e} |d| min {:.3e} max {:.3e}; max |root| {rmax:.6}; s {:?}",
+                dv.iter().copied().fold(f64::INFINITY, f64::min),
+                dv.iter().copied().fold(0.0, f64::max),
+                &s.iter().rev().take(3).collect::<Vec<_>>()
+            );
+        }
+        // the next weights
+        for k in 0..l {
+            let d = eval(&den, phi[k * nc + 1]).norm();
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(SkError::numerical(
+                    "SK weights",
+                    format!(
+                        "the denominator vanishes at line {k} ({:.6} rad/s): a pole on the \
+                         measured axis",
+                        data.omegas[k]
+                    ),
+                ));
+            }
+            skw[k] = d.powf(-gamma);
+        }
+    }
+    Ok(SkDenominator {
+        den,
+        cost_history: history,
+        iterations,
+        convergence,
+        ls_condition,
+    })
+}
