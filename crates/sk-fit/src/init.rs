@@ -9,7 +9,7 @@ use crate::stats::f_critical;
 use crate::{Prepared, SkError};
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
 use frf_data::{DelayChoice, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
-use poly_basis::{roots, Basis};
+use poly_basis::Basis;
 use realize::{FrfModel, Hold, KnownFactors, ModalModel, C64};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -52,6 +52,9 @@ pub struct SkConfig {
     /// weighted data energy (an exact fit: noise-free data). Default: 1e-16 (relative
     /// error 1e-8).
     pub exact_rel_cost: f64,
+    /// SK iterations (after the Levy start) of each order of the sweep, at most; the
+    /// chosen order is then fitted again with `iter.max_iter`. Default: 4.
+    pub sweep_max_iter: usize,
     /// The basis. Default: [`BasisChoice::Auto`].
     pub basis: BasisChoice,
     /// SK iteration settings. Default: [`SkIterConfig::default`] (weight `1/|d|`, 30
@@ -101,6 +104,7 @@ impl Default for SkConfig {
             order_alpha: 1e-3,
             patience: 2,
             exact_rel_cost: 1e-16,
+            sweep_max_iter: 4,
             basis: BasisChoice::Auto,
             iter: SkIterConfig::default(),
             hold: Hold::None,
@@ -243,7 +247,7 @@ impl SkInit {
     fn sort_poles(
         &self,
         basis: &Basis,
-        den: &[f64],
+        x_roots: &[C64],
         w_lo: f64,
         notes: &mut Vec<String>,
     ) -> Result<(PoleSet, Vec<C64>, usize, usize), SkError> {
@@ -255,7 +259,7 @@ impl SkInit {
             Basis::Sampled { ts, .. } => Some(PI / ts),
             _ => None,
         };
-        for x in roots(den)? {
+        for &x in x_roots {
             let s = match basis.to_s(x) {
                 Ok(s) => s,
                 Err(e) => {
@@ -299,6 +303,7 @@ impl SkInit {
         prep: &Prepared,
         basis: &Basis,
         n: usize,
+        iter: &SkIterConfig,
     ) -> Result<Candidate, SkError> {
         let cfg = &self.config;
         let l = prep.n_lines();
@@ -321,11 +326,11 @@ impl SkInit {
                 limit: cfg.max_condition,
             });
         }
-        let sk = sk_denominator(prep, basis, n, &cfg.iter)?;
+        let sk = sk_denominator(prep, basis, n, iter)?;
         let mut notes = Vec::new();
         let (w_lo, _) = prep.band();
         let (set, near_zero, mut reflected, dropped) =
-            self.sort_poles(basis, &sk.den, w_lo, &mut notes)?;
+            self.sort_poles(basis, &sk.roots, w_lo, &mut notes)?;
         let hold = cfg.hold;
         let (model, cost, poles) = if near_zero.is_empty() {
             let (m, c) = fit_residues(prep, &set, hold, cfg.feedthrough)?;
@@ -336,11 +341,12 @@ impl SkInit {
             snapped.integrators = near_zero.len();
             let a = fit_residues(prep, &snapped, hold, cfg.feedthrough);
             let mut free = set.clone();
+            let mut free_reflected = 0;
             for s in &near_zero {
                 let mut s = *s;
                 if s.re > 0.0 && cfg.stabilize {
                     if s.im >= 0.0 {
-                        reflected += 1;
+                        free_reflected += 1;
                     }
                     s.re = -s.re;
                 }
@@ -363,6 +369,7 @@ impl SkInit {
                         near_zero.len(),
                         cfg.rigid_cost_ratio
                     ));
+                    reflected += free_reflected;
                     (mb, cb, free)
                 }
                 (Err(e), Err(_)) => return Err(e),
@@ -409,7 +416,11 @@ impl SkInit {
         while n <= max {
             cfg.progress
                 .step("sk order sweep", n, Some(max), None, format!("order {n}"));
-            match self.fit_order(prep, basis, n) {
+            let iter = SkIterConfig {
+                max_iter: cfg.sweep_max_iter.min(cfg.iter.max_iter),
+                ..cfg.iter.clone()
+            };
+            match self.fit_order(prep, basis, n, &iter) {
                 Err(e @ SkError::SingularBasis { .. }) => {
                     scores.push(OrderScore {
                         order: n,
@@ -577,11 +588,17 @@ impl Estimator for SkInit {
         let (order, cand) = match cfg.order {
             Some(n) => {
                 report.order_given = true;
-                (n, self.fit_order(&prep, &basis, n)?)
+                (n, self.fit_order(&prep, &basis, n, &cfg.iter)?)
             }
             None => {
                 let (n, c, scores) = self.sweep(&prep, &basis)?;
                 report.sweep = scores;
+                // the chosen order to convergence, unless the sweep already converged
+                let c = if c.sk.convergence.is_converged() {
+                    c
+                } else {
+                    self.fit_order(&prep, &basis, n, &cfg.iter)?
+                };
                 (n, c)
             }
         };

@@ -23,8 +23,9 @@
 use crate::{Prepared, SkError};
 use faer::Mat;
 use frf_data::Convergence;
-use poly_basis::{eval, Basis};
+use poly_basis::{Basis, Orthogonal};
 use realize::C64;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// The SK weight on the previous denominator.
@@ -79,8 +80,11 @@ impl Default for SkIterConfig {
 /// The common denominator found by [`sk_denominator`].
 #[derive(Debug, Clone)]
 pub struct SkDenominator {
-    /// Coefficients of `d(x)` in the basis, ascending, `||d|| = 1`.
+    /// Coefficients of `d(x)` in the orthonormal basis of the last iteration,
+    /// `||d|| = 1`.
     pub den: Vec<f64>,
+    /// The roots of `d` in the basis variable `x`.
+    pub roots: Vec<C64>,
     /// The SK cost after the Levy start and each iteration: the sum of the squared
     /// weighted equation errors (the smallest squared singular value) relative to the
     /// same weighted sum of `|G d|^2`, so that it does not depend on the scale of the
@@ -96,13 +100,41 @@ pub struct SkDenominator {
     pub ls_condition: f64,
 }
 
-/// The powers `x_k^j`, `j = 0..=n`, at every line (line-major).
-pub(crate) fn powers(basis: &Basis, omegas: &[f64], n: usize) -> Vec<C64> {
-    let mut phi = vec![C64::new(0.0, 0.0); omegas.len() * (n + 1)];
-    for (k, &w) in omegas.iter().enumerate() {
-        basis.powers_into(w, &mut phi[k * (n + 1)..(k + 1) * (n + 1)]);
+/// The `R_22` block of the QR factorisation of entry `e`'s `[A_N | A_D]`: its
+/// denominator columns projected onto the orthogonal complement of its numerator
+/// columns (`None` when every weight of the entry is zero).
+fn reduced_block(data: &Prepared, ob: &Orthogonal, skw: &[f64], e: usize) -> Option<Mat<f64>> {
+    let l = data.n_lines();
+    let m = data.m();
+    let nc = ob.degree + 1;
+    let mut block = Mat::<f64>::zeros(2 * l, 2 * nc);
+    let mut any = false;
+    for k in 0..l {
+        let idx = k * m + e;
+        let q = data.w[idx].sqrt() * skw[k];
+        let g = data.g[idx] * q;
+        any |= q > 0.0;
+        for (j, p) in ob.row(k).iter().enumerate() {
+            let a = p * q;
+            block[(k, j)] = a.re;
+            block[(l + k, j)] = a.im;
+            let b = -(p * g);
+            block[(k, nc + j)] = b.re;
+            block[(l + k, nc + j)] = b.im;
+        }
     }
-    phi
+    if !any {
+        return None;
+    }
+    let qr = block.qr();
+    let r = qr.thin_R();
+    Some(Mat::from_fn(nc, nc, |i, j| {
+        if j >= i {
+            r[(nc + i, nc + j)]
+        } else {
+            0.0
+        }
+    }))
 }
 
 /// SK iterations for the order-`n` common denominator of `data` in `basis` (see the
@@ -123,46 +155,36 @@ pub fn sk_denominator(
             max: l.saturating_sub(2),
         });
     }
-    let phi = powers(basis, &data.omegas, n);
+    let x: Vec<C64> = data.omegas.iter().map(|&w| basis.at(w)).collect();
+    // sum_e w_ke |G_ke|^2: the basis weight of the Levy start
+    let gw: Vec<f64> = (0..l)
+        .map(|k| (0..m).map(|e| data.w[k * m + e] * data.g[k * m + e].norm_sqr()).sum())
+        .collect();
     let gamma = cfg.weight.exponent();
     // |d_prev(x_k)|^-gamma, 1 for the Levy start
     let mut skw = vec![1.0; l];
-    let mut block = Mat::<f64>::zeros(2 * l, 2 * nc);
     let mut stacked = Mat::<f64>::zeros(m * nc, nc);
     let mut history = Vec::new();
     let mut den = vec![0.0; nc];
+    let mut ortho = None;
     let mut ls_condition = f64::NAN;
     let mut convergence = Convergence::MaxIterations {
         limit: cfg.max_iter,
     };
     let mut iterations = 0;
     for it in 0..=cfg.max_iter {
+        // the basis orthonormal in the weight of this iteration's denominator columns
+        let bw: Vec<f64> = (0..l).map(|k| gw[k] * skw[k] * skw[k]).collect();
+        let ob = Orthogonal::new(&x, &bw, n)?;
+        let blocks: Vec<Option<Mat<f64>>> = (0..m)
+            .into_par_iter()
+            .map(|e| reduced_block(data, &ob, &skw, e))
+            .collect();
         let mut used = 0;
-        for e in 0..m {
-            let mut any = false;
-            for k in 0..l {
-                let idx = k * m + e;
-                let q = data.w[idx].sqrt() * skw[k];
-                let g = data.g[idx] * q;
-                any |= q > 0.0;
-                let row = &phi[k * nc..(k + 1) * nc];
-                for (j, p) in row.iter().enumerate() {
-                    let a = p * q;
-                    block[(k, j)] = a.re;
-                    block[(l + k, j)] = a.im;
-                    let b = -(p * g);
-                    block[(k, nc + j)] = b.re;
-                    block[(l + k, nc + j)] = b.im;
-                }
-            }
-            if !any {
-                continue;
-            }
-            let qr = block.qr();
-            let r = qr.thin_R();
+        for r22 in blocks.into_iter().flatten() {
             for i in 0..nc {
                 for j in 0..nc {
-                    stacked[(used * nc + i, j)] = if j >= i { r[(nc + i, nc + j)] } else { 0.0 };
+                    stacked[(used * nc + i, j)] = r22[(i, j)];
                 }
             }
             used += 1;
@@ -204,17 +226,10 @@ pub fn sk_denominator(
         if den[jmax] < 0.0 {
             den.iter_mut().for_each(|d| *d = -*d);
         }
-        // relative to the weighted size of G d on the lines: scale-free across
-        // iterations (the weights 1/|d_prev| change scale) and 0 for an exact fit
-        let mut gd = 0.0;
-        for k in 0..l {
-            let d = eval(&den, phi[k * nc + 1]).norm_sqr() * skw[k] * skw[k];
-            for e in 0..m {
-                let idx = k * m + e;
-                gd += d * data.w[idx] * data.g[idx].norm_sqr();
-            }
-        }
-        let cost = cost / gd.max(f64::MIN_POSITIVE);
+        let ob = &*ortho.insert(ob);
+        // the basis is orthonormal in the weights of the denominator columns and
+        // ||d|| = 1: the cost is relative to the weighted size of G d (scale-free across
+        // iterations, 0 for an exact fit)
         history.push(cost);
         iterations = it;
         if it > 0 {
@@ -233,20 +248,9 @@ pub fn sk_denominator(
                 break;
             }
         }
-        if std::env::var("SK_DEBUG").is_ok() {
-            let dv: Vec<f64> = (0..l).map(|k| eval(&den, phi[k * nc + 1]).norm()).collect();
-            let r = poly_basis::roots(&den).unwrap_or_default();
-            let rmax = r.iter().map(|z| z.norm()).fold(0.0, f64::max);
-            eprintln!(
-                "it {it}: cost {cost:.3e} |d| min {:.3e} max {:.3e}; max |root| {rmax:.6}; s {:?}",
-                dv.iter().copied().fold(f64::INFINITY, f64::min),
-                dv.iter().copied().fold(0.0, f64::max),
-                &s.iter().rev().take(3).collect::<Vec<_>>()
-            );
-        }
         // the next weights
         for k in 0..l {
-            let d = eval(&den, phi[k * nc + 1]).norm();
+            let d = ob.eval_at(&den, k).norm();
             if !(d > 0.0 && d.is_finite()) {
                 return Err(SkError::numerical(
                     "SK weights",
@@ -260,8 +264,11 @@ pub fn sk_denominator(
             skw[k] = d.powf(-gamma);
         }
     }
+    let ob = ortho.ok_or_else(|| SkError::numerical("SK iteration", "no iteration ran"))?;
+    let roots = ob.roots(&den)?;
     Ok(SkDenominator {
         den,
+        roots,
         cost_history: history,
         iterations,
         convergence,

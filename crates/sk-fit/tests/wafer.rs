@@ -47,6 +47,7 @@ fn wafer_nominal_sk_reaches_the_reference() {
     ) else {
         return;
     };
+    faer::set_global_parallelism(faer::Par::Seq);
     let data = read_frf_csv(&data).unwrap();
     let clean = read_frf_csv(&clean).unwrap();
     let truth = Truth::read(&truth).unwrap();
