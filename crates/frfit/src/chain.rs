@@ -24,6 +24,7 @@ use crate::FrfitError;
 use additive_riv::structure::AdaptConfig;
 use additive_riv::{CmifInit, CmifInitConfig, RigidBody, RivConfig, RivRefine, RivRefineConfig};
 use frf_data::chain::{weighted_cost, DynData};
+use sk_fit::{SkConfig, SkInit};
 use frf_data::{
     ChainModel, ChainOutput, ChainSettings, DelayChoice, InitLink, Initializer, LinkReport,
     RefineLink, Refiner,
@@ -93,6 +94,22 @@ fn make_cmif(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Initializer> {
     })
 }
 
+fn make_sk(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer> {
+    Box::new(InitLink {
+        name: "sk".into(),
+        estimator: SkInit::new(SkConfig {
+            order: s.order,
+            peaks: s.peaks.clone(),
+            hold: s.hold,
+            delay: s.delay,
+            derivative_order: s.derivative_order,
+            weighting: s.weighting.clone(),
+            progress: s.progress.clone(),
+            ..Default::default()
+        }),
+    })
+}
+
 fn make_riv(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
     let mut riv = o.riv.clone();
     riv.weighting = s.weighting.clone();
@@ -108,11 +125,18 @@ fn make_riv(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
 }
 
 /// The initialisers frfit knows.
-pub const INITIALIZERS: &[InitEntry] = &[InitEntry {
-    name: "cmif",
-    description: "CMIF peaks + convex numerators (eq. 24 of the wafer-stage paper)",
-    make: make_cmif,
-}];
+pub const INITIALIZERS: &[InitEntry] = &[
+    InitEntry {
+        name: "cmif",
+        description: "CMIF peaks + convex numerators (eq. 24 of the wafer-stage paper)",
+        make: make_cmif,
+    },
+    InitEntry {
+        name: "sk",
+        description: "Sanathanan-Koerner common denominator (Jue 2.2, 2.4), order by F-test sweep, residues by least squares",
+        make: make_sk,
+    },
+];
 
 /// The refiners frfit knows.
 pub const REFINERS: &[RefineEntry] = &[
@@ -130,7 +154,7 @@ pub const REFINERS: &[RefineEntry] = &[
 
 /// Methods of the design that are not implemented yet, named in the error so that a
 /// user knows they are planned and what to use instead.
-const PLANNED_INIT: &[&str] = &["sk", "subspace"];
+const PLANNED_INIT: &[&str] = &["subspace"];
 const PLANNED_REFINE: &[&str] = &["ml"];
 
 fn unknown(option: &str, name: &str, known: &[&str], planned: &[&str]) -> FrfitError {

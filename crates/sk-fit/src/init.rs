@@ -7,6 +7,7 @@ use crate::residues::{fit_residues, PoleSet};
 use crate::sk::{sk_denominator, SkDenominator, SkIterConfig};
 use crate::stats::f_critical;
 use crate::{Prepared, SkError};
+use frf_data::cmif::{cmif, pick_peaks, PeakConfig};
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
 use frf_data::{DelayChoice, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
 use poly_basis::Basis;
@@ -41,12 +42,18 @@ pub struct SkConfig {
     pub order: Option<usize>,
     /// Smallest order of the sweep. Default: 2.
     pub min_order: usize,
+    /// Start the sweep at `max(min_order, 2 p - 4)` with `p` the number of CMIF peaks
+    /// (each peak a pole pair; 4 fewer poles leave room for merged or spurious
+    /// peaks), instead of at `min_order`. Default: true.
+    pub start_from_peaks: bool,
+    /// CMIF peak picker settings for `start_from_peaks`.
+    pub peaks: PeakConfig,
     /// Largest order of the sweep (also capped by the data support). Default: 80.
     pub max_order: usize,
     /// Significance level of the F test of the sweep. Default: 1e-3.
     pub order_alpha: f64,
     /// The sweep stops after this many consecutive orders that are not significantly
-    /// better than the chosen one. Default: 2.
+    /// better than the chosen one. Default: 3.
     pub patience: usize,
     /// The sweep stops at an order whose weighted cost is below this fraction of the
     /// weighted data energy (an exact fit: noise-free data). Default: 1e-16 (relative
@@ -100,9 +107,11 @@ impl Default for SkConfig {
         Self {
             order: None,
             min_order: 2,
+            start_from_peaks: true,
+            peaks: PeakConfig::default(),
             max_order: 80,
             order_alpha: 1e-3,
-            patience: 2,
+            patience: 3,
             exact_rel_cost: 1e-16,
             sweep_max_iter: 4,
             basis: BasisChoice::Auto,
@@ -149,11 +158,14 @@ pub struct SkReport {
     pub order: usize,
     /// Whether the order was given (`true`) or chosen by the sweep.
     pub order_given: bool,
+    /// CMIF peaks that set the start of the sweep, when they did.
+    pub cmif_peaks: Option<usize>,
     /// The sweep (empty when the order was given). The order test: an order replaces
     /// the chosen one when its F statistic `((V_c - V_n) / dp) / (V_n / (N - p_n))`
     /// exceeds `chi2_dp(alpha) / dp` (`dp` added parameters: one per pole and one per
-    /// entry and pole; `N` real residuals); the sweep runs upwards in steps of 2 and
-    /// stops after `patience` orders that do not, or at an exact fit.
+    /// entry and pole; `N` real residuals); the sweep runs upwards in steps of 2 from
+    /// the start (see [`SkConfig::start_from_peaks`]) and stops after `patience` orders
+    /// that do not, or at an exact fit.
     pub sweep: Vec<OrderScore>,
     /// SK iterations after the Levy start.
     pub iterations: usize,
@@ -392,6 +404,7 @@ impl SkInit {
         &self,
         prep: &Prepared,
         basis: &Basis,
+        start: usize,
     ) -> Result<(usize, Candidate, Vec<OrderScore>), SkError> {
         let cfg = &self.config;
         let l = prep.n_lines();
@@ -399,7 +412,7 @@ impl SkInit {
         let n_res = prep.w.iter().filter(|w| **w > 0.0).count() * 2;
         let energy = prep.energy();
         let max = cfg.max_order.min(l.saturating_sub(2));
-        let start = cfg.min_order.max(1);
+        let start = start.max(1);
         if start > max {
             return Err(SkError::OrderExceedsData {
                 order: start,
@@ -591,7 +604,14 @@ impl Estimator for SkInit {
                 (n, self.fit_order(&prep, &basis, n, &cfg.iter)?)
             }
             None => {
-                let (n, c, scores) = self.sweep(&prep, &basis)?;
+                let mut start = cfg.min_order;
+                if cfg.start_from_peaks {
+                    let c = cmif(data)?;
+                    let p = pick_peaks(&c, &cfg.peaks).len();
+                    start = start.max((2 * p).saturating_sub(4));
+                    report.cmif_peaks = Some(p);
+                }
+                let (n, c, scores) = self.sweep(&prep, &basis, start)?;
                 report.sweep = scores;
                 // the chosen order to convergence, unless the sweep already converged
                 let c = if c.sk.convergence.is_converged() {

@@ -146,7 +146,7 @@ pub fn fit_residues(
             let s = scale[j];
             a.col_mut(j).iter_mut().for_each(|v| *v *= s);
         }
-        let x = a.col_piv_qr().solve_lstsq(&b);
+        let x = a.qr().solve_lstsq(&b);
         for j in 0..p {
             coef[e][j] = x[(j, 0)] * scale[j];
         }

@@ -12,6 +12,17 @@
 //! Real coefficients: every complex equation gives its real and imaginary part as two
 //! real rows.
 //!
+//! The polynomials are expressed, in each iteration, in the basis of
+//! [`poly_basis::Orthogonal`] polynomials of the basis variable that are orthonormal on
+//! the lines in the weight of the denominator columns, `sum_e w_ke |G_ke|^2 / |d_i|^2g`.
+//! The powers of even a well-conditioned variable fail at high order for lightly damped
+//! systems: a denominator with 36 roots near the unit circle varies by 1e13 over the
+//! lines, its values at the resonances cancel to rounding, and the Levy problem of the
+//! wafer stage then has three singular values at rounding level on noise-free data (the
+//! SK iterations diverge). In the orthonormal basis the same fit reaches a median error
+//! of 1.6e-9 on noise-free data. The roots come from the basis recurrence
+//! ([`poly_basis::Orthogonal::roots`]), never from monomial coefficients.
+//!
 //! The numerators are eliminated per entry (variable projection): the QR factorisation
 //! of the entry's block `[A_N | A_D]` (2 L rows) leaves in its `R_22` block the
 //! denominator columns projected onto the orthogonal complement of the numerator
@@ -157,9 +168,18 @@ pub fn sk_denominator(
     }
     let x: Vec<C64> = data.omegas.iter().map(|&w| basis.at(w)).collect();
     // sum_e w_ke |G_ke|^2: the basis weight of the Levy start
-    let gw: Vec<f64> = (0..l)
+    let mut gw: Vec<f64> = (0..l)
         .map(|k| (0..m).map(|e| data.w[k * m + e] * data.g[k * m + e].norm_sqr()).sum())
         .collect();
+    // only relative weights matter: scaled to a largest value of 1
+    let gmax = gw.iter().copied().fold(0.0, f64::max);
+    if !(gmax > 0.0 && gmax.is_finite()) {
+        return Err(SkError::numerical(
+            "SK iteration",
+            "the weighted data are all zero or not finite: nothing to fit",
+        ));
+    }
+    gw.iter_mut().for_each(|g| *g /= gmax);
     let gamma = cfg.weight.exponent();
     // |d_prev(x_k)|^-gamma, 1 for the Levy start
     let mut skw = vec![1.0; l];
@@ -263,6 +283,16 @@ pub fn sk_denominator(
             }
             skw[k] = d.powf(-gamma);
         }
+        // only relative weights matter: scaled to a largest value of 1 (the scale of
+        // d in the orthonormal basis would otherwise drift from one iteration to the next)
+        let smax = skw.iter().copied().fold(0.0, f64::max);
+        if !(smax.is_finite() && smax > 0.0) {
+            return Err(SkError::numerical(
+                "SK weights",
+                format!("the weights 1/|d| are not finite at iteration {it}"),
+            ));
+        }
+        skw.iter_mut().for_each(|w| *w /= smax);
     }
     let ob = ortho.ok_or_else(|| SkError::numerical("SK iteration", "no iteration ran"))?;
     let roots = ob.roots(&den)?;
