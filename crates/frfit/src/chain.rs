@@ -24,11 +24,11 @@ use crate::FrfitError;
 use additive_riv::structure::AdaptConfig;
 use additive_riv::{CmifInit, CmifInitConfig, RigidBody, RivConfig, RivRefine, RivRefineConfig};
 use frf_data::chain::{weighted_cost, DynData};
-use sk_fit::{SkConfig, SkInit};
 use frf_data::{
     ChainModel, ChainOutput, ChainSettings, DelayChoice, InitLink, Initializer, LinkReport,
     RefineLink, Refiner,
 };
+use sk_fit::{SkConfig, SkInit};
 
 /// Options of the additive links that the pipeline sets beyond [`ChainSettings`].
 #[derive(Debug, Clone)]
@@ -104,6 +104,7 @@ fn make_sk(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer> {
             delay: s.delay,
             derivative_order: s.derivative_order,
             weighting: s.weighting.clone(),
+            precomputed: s.precomputed.clone(),
             progress: s.progress.clone(),
             ..Default::default()
         }),

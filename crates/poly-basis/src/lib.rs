@@ -362,8 +362,8 @@ impl Orthogonal {
                 why: format!("one weight per point expected ({l})"),
             });
         }
-        if let Some(k) =
-            (0..l).find(|&k| !(weights[k] >= 0.0 && weights[k].is_finite()) || !points[k].is_finite())
+        if let Some(k) = (0..l)
+            .find(|&k| !(weights[k] >= 0.0 && weights[k].is_finite()) || !points[k].is_finite())
         {
             return Err(BasisError::InvalidParameter {
                 name: format!("point/weight {k}"),
@@ -613,7 +613,9 @@ mod tests {
         let b = Basis::bilinear(w[0], w[w.len() - 1]).unwrap();
         let x: Vec<C64> = w.iter().map(|&o| b.at(o)).collect();
         // weights with a dynamic range of 1e12, as 1/|d|^2 near lightly damped roots
-        let wt: Vec<f64> = (0..x.len()).map(|k| 10f64.powf(12.0 * ((k * 7) % 13) as f64 / 12.0)).collect();
+        let wt: Vec<f64> = (0..x.len())
+            .map(|k| 10f64.powf(12.0 * ((k * 7) % 13) as f64 / 12.0))
+            .collect();
         let n = 60;
         let o = Orthogonal::new(&x, &wt, n).unwrap();
         let mut worst: f64 = 0.0;
@@ -646,7 +648,10 @@ mod tests {
         r.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
         assert_eq!(r.len(), 3);
         assert!((r[0] - r0[2]).norm() < 1e-10, "{r:?}");
-        assert!((r[1] - r0[1]).norm() < 1e-10 && (r[2] - r0[0]).norm() < 1e-10, "{r:?}");
+        assert!(
+            (r[1] - r0[1]).norm() < 1e-10 && (r[2] - r0[0]).norm() < 1e-10,
+            "{r:?}"
+        );
         // too few points for the degree: numerically singular, a clear error
         let e = Orthogonal::new(&x[..5], &wt[..5], 12).unwrap_err();
         assert!(e.to_string().contains("numerically singular"), "{e}");

@@ -9,7 +9,7 @@ use crate::stats::f_critical;
 use crate::{Prepared, SkError};
 use frf_data::cmif::{cmif, pick_peaks, PeakConfig};
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
-use frf_data::{DelayChoice, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
+use frf_data::{DelayChoice, Estimator, Fit, FrfDataset, Precomputed, ProgressSink, Weighting};
 use poly_basis::Basis;
 use realize::{FrfModel, Hold, KnownFactors, ModalModel, C64};
 use serde::{Deserialize, Serialize};
@@ -98,6 +98,9 @@ pub struct SkConfig {
     /// Largest condition number of the basis on the lines at the fitted order.
     /// Default: 1e12.
     pub max_condition: f64,
+    /// Analyses of the data the caller already made (delay estimate, CMIF), used
+    /// instead of computing them again. Default: none.
+    pub precomputed: Precomputed,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -127,6 +130,7 @@ impl Default for SkConfig {
             rigid_cost_ratio: 1.1,
             stabilize: true,
             max_condition: 1e12,
+            precomputed: Precomputed::default(),
             progress: ProgressSink::none(),
         }
     }
@@ -370,9 +374,7 @@ impl SkInit {
             }
             let b = fit_residues(prep, &free, hold, cfg.feedthrough);
             match (a, b) {
-                (Ok((ma, ca)), Ok((_, cb))) if ca <= cfg.rigid_cost_ratio * cb => {
-                    (ma, ca, snapped)
-                }
+                (Ok((ma, ca)), Ok((_, cb))) if ca <= cfg.rigid_cost_ratio * cb => (ma, ca, snapped),
                 (Ok((ma, ca)), Err(_)) => (ma, ca, snapped),
                 (_, Ok((mb, cb))) => {
                     notes.push(format!(
@@ -550,7 +552,10 @@ impl Estimator for SkInit {
             DelayChoice::Start { seconds } => (seconds, true),
             DelayChoice::Auto => {
                 let t = Instant::now();
-                let est = estimate_delay(data, &cfg.delay_config)?;
+                let est = match &cfg.precomputed.delay {
+                    Some(d) => d.clone(),
+                    None => estimate_delay(data, &cfg.delay_config)?,
+                };
                 timings.push(("delay", t.elapsed()));
                 let mut tau = est.tau_s - hold_share;
                 if let Hold::Zoh { fs_hz } = cfg.hold {
@@ -594,7 +599,10 @@ impl Estimator for SkInit {
             });
         }
         let band = prep.band();
-        report.band_hz = (band.0 / std::f64::consts::TAU, band.1 / std::f64::consts::TAU);
+        report.band_hz = (
+            band.0 / std::f64::consts::TAU,
+            band.1 / std::f64::consts::TAU,
+        );
         let basis = self.basis(band)?;
         report.basis = basis.name();
         let t = Instant::now();
@@ -606,8 +614,15 @@ impl Estimator for SkInit {
             None => {
                 let mut start = cfg.min_order;
                 if cfg.start_from_peaks {
-                    let c = cmif(data)?;
-                    let p = pick_peaks(&c, &cfg.peaks).len();
+                    let computed;
+                    let c = match cfg.precomputed.cmif_of(data) {
+                        Some(c) => c,
+                        None => {
+                            computed = cmif(data)?;
+                            &computed
+                        }
+                    };
+                    let p = pick_peaks(c, &cfg.peaks).len();
                     start = start.max((2 * p).saturating_sub(4));
                     report.cmif_peaks = Some(p);
                 }
@@ -642,15 +657,16 @@ impl Estimator for SkInit {
             ));
         }
         if !cand.sk.convergence.is_converged() {
-            messages.push(format!(
-                "SK iterations: {}",
-                cand.sk.convergence.describe()
-            ));
+            messages.push(format!("SK iterations: {}", cand.sk.convergence.describe()));
         }
         messages.push(format!(
             "order {order} ({}): {} pole pairs, {} real poles, {} integrators; basis {} \
              (condition {:.2e})",
-            if report.order_given { "given" } else { "chosen by the F-test sweep" },
+            if report.order_given {
+                "given"
+            } else {
+                "chosen by the F-test sweep"
+            },
             report.pairs,
             report.real_poles,
             report.integrators,
@@ -669,8 +685,7 @@ impl Estimator for SkInit {
             iterations: cand.sk.iterations,
             convergence: cand.sk.convergence,
             timings: Vec::new(),
-            estimator: "Sanathanan-Koerner common denominator + residues by least squares"
-                .into(),
+            estimator: "Sanathanan-Koerner common denominator + residues by least squares".into(),
             messages,
         };
         for (stage, d) in timings {

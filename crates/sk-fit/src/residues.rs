@@ -11,8 +11,8 @@
 //! ([`ModalModel::zoh_response`]), so the residues are those of the continuous plant.
 
 use crate::{Prepared, SkError};
-use faer::Mat;
 use faer::linalg::solvers::SolveLstsq;
+use faer::Mat;
 use realize::{Hold, ModalModel, PolePair, RealPole, C64};
 
 /// Poles of the continuous-time model, sorted.
@@ -110,7 +110,11 @@ pub fn fit_residues(
             max: l.saturating_sub(2),
         });
     }
-    if cols.iter().flatten().any(|v| !(v.re.is_finite() && v.im.is_finite())) {
+    if cols
+        .iter()
+        .flatten()
+        .any(|v| !(v.re.is_finite() && v.im.is_finite()))
+    {
         return Err(SkError::numerical(
             "residue fit",
             "a partial fraction is not finite on the lines (a pole on the measured axis)",

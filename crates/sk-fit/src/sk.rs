@@ -35,8 +35,8 @@ use crate::{Prepared, SkError};
 use faer::Mat;
 use frf_data::Convergence;
 use poly_basis::{Basis, Orthogonal};
-use realize::C64;
 use rayon::prelude::*;
+use realize::C64;
 use serde::{Deserialize, Serialize};
 
 /// The SK weight on the previous denominator.
@@ -169,7 +169,11 @@ pub fn sk_denominator(
     let x: Vec<C64> = data.omegas.iter().map(|&w| basis.at(w)).collect();
     // sum_e w_ke |G_ke|^2: the basis weight of the Levy start
     let mut gw: Vec<f64> = (0..l)
-        .map(|k| (0..m).map(|e| data.w[k * m + e] * data.g[k * m + e].norm_sqr()).sum())
+        .map(|k| {
+            (0..m)
+                .map(|e| data.w[k * m + e] * data.g[k * m + e].norm_sqr())
+                .sum()
+        })
         .collect();
     // only relative weights matter: scaled to a largest value of 1
     let gmax = gw.iter().copied().fold(0.0, f64::max);

@@ -57,7 +57,10 @@ fn data(truth: &FrfModel, lines: usize, noise: f64, seed: u64) -> Frf {
     for v in vals.iter_mut() {
         let s = noise * v.norm();
         let a = s * 3f64.sqrt() / 2f64.sqrt();
-        *v += frf_data::C64::new(rng.random_range(-1.0..1.0) * a, rng.random_range(-1.0..1.0) * a);
+        *v += frf_data::C64::new(
+            rng.random_range(-1.0..1.0) * a,
+            rng.random_range(-1.0..1.0) * a,
+        );
         var.push((s * s).max(1e-300));
     }
     let frf = Frf::new(f, truth.ny(), truth.nu(), vals, None).unwrap();
@@ -73,7 +76,6 @@ fn error(model: &FrfModel, truth: &FrfModel, data: &Frf) -> f64 {
     let g = truth.freq_response(&w).unwrap();
     model.relative_error(&w, &g).unwrap().0
 }
-
 
 fn sk_with(truth: &FrfModel, d: &Frf, cfg: SkConfig) -> Result<(FrfModel, SkReport), SkError> {
     let cfg = SkConfig {
@@ -162,7 +164,10 @@ fn error_falls_with_the_noise() {
         };
         let (e3, e4) = (run(1e-3), run(1e-4));
         println!("seed {seed}: noise 1e-3 -> {e3:.3e}, 1e-4 -> {e4:.3e}");
-        assert!(e3 / e4 >= 5.0, "seed {seed}: noise 1e-3 -> {e3:.3e}, 1e-4 -> {e4:.3e}");
+        assert!(
+            e3 / e4 >= 5.0,
+            "seed {seed}: noise 1e-3 -> {e3:.3e}, 1e-4 -> {e4:.3e}"
+        );
         assert!(e3 < 1e-3, "seed {seed}: {e3:.3e} at noise 1e-3");
     }
 }
@@ -182,8 +187,21 @@ fn bad_input_is_reported() {
         },
     )
     .unwrap_err();
-    assert!(matches!(e, SkError::OrderExceedsData { order: 30, lines: 20, max: 18 }), "{e}");
-    assert!(e.to_string().contains("larger than the data support"), "{e}");
+    assert!(
+        matches!(
+            e,
+            SkError::OrderExceedsData {
+                order: 30,
+                lines: 20,
+                max: 18
+            }
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("larger than the data support"),
+        "{e}"
+    );
 
     let d = data(&truth, 600, 0.0, 5);
     let e = sk_with(

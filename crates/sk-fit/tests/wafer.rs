@@ -13,7 +13,12 @@ use sk_fit::{SkConfig, SkInit};
 /// Median relative error against `reference` and the number of true modes below
 /// 2000 Hz matched by a fitted mode within `f_tol` (relative), with the worst frequency
 /// error and the number of fitted modes in the band.
-fn compare(model: &FrfModel, reference: &dyn FrfDataset, truth: &Truth, f_tol: f64) -> (f64, f64, usize, f64, usize) {
+fn compare(
+    model: &FrfModel,
+    reference: &dyn FrfDataset,
+    truth: &Truth,
+    f_tol: f64,
+) -> (f64, f64, usize, f64, usize) {
     let w = reference.omegas();
     let g = realize::ResponseGrid {
         values: reference.values_vec(),
@@ -33,7 +38,10 @@ fn compare(model: &FrfModel, reference: &dyn FrfDataset, truth: &Truth, f_tol: f
             matched += 1;
         }
     }
-    let in_band = fitted.iter().filter(|f| f.f_hz >= 20.0 && f.f_hz <= 2000.0).count();
+    let in_band = fitted
+        .iter()
+        .filter(|f| f.f_hz >= 20.0 && f.f_hz <= 2000.0)
+        .count();
     (median, p95, matched, worst, in_band)
 }
 
