@@ -363,7 +363,7 @@ impl Orthogonal {
             });
         }
         if let Some(k) = (0..l)
-            .find(|&k| !(weights[k] >= 0.0 && weights[k].is_finite()) || !points[k].is_finite())
+            .find(|&k| !(weights[k] >= 0.0 && weights[k].is_finite() && points[k].is_finite()))
         {
             return Err(BasisError::InvalidParameter {
                 name: format!("point/weight {k}"),
@@ -381,7 +381,7 @@ impl Orthogonal {
         };
         let mut cols: Vec<Vec<C64>> = Vec::with_capacity(nc);
         let w0: f64 = weights.iter().sum();
-        if !(w0 > 0.0) {
+        if w0.is_nan() || w0 <= 0.0 {
             return Err(BasisError::Numerical {
                 what: "orthogonal basis".into(),
                 why: "every weight is zero".into(),
@@ -403,7 +403,7 @@ impl Orthogonal {
                 }
             }
             let nv = dot(&v, &v).sqrt();
-            if !(nv > 1e-13 * norm0) {
+            if nv.is_nan() || nv <= 1e-13 * norm0 {
                 return Err(BasisError::Numerical {
                     what: format!("orthogonal basis of degree {degree}"),
                     why: format!(

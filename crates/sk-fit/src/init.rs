@@ -334,7 +334,7 @@ impl SkInit {
             });
         }
         let basis_condition = basis.condition_number(&prep.omegas, n)?;
-        if !(basis_condition <= cfg.max_condition) {
+        if basis_condition.is_nan() || basis_condition > cfg.max_condition {
             return Err(SkError::SingularBasis {
                 basis: basis.name(),
                 order: n,
