@@ -22,6 +22,11 @@
 //!   rational in `z`, so a fit in this basis is exact for sampled data; poles map back
 //!   by the exact inverse `s = ln(z) / T_s`.
 //!
+//! - [`Orthogonal`]: polynomials of any of these variables that are orthonormal on the
+//!   lines in a given weight (Vandermonde with Arnoldi), with their roots from the
+//!   recurrence: what keeps high-order fits of lightly damped systems conditioned when
+//!   even the powers of a unit-circle variable cancel to rounding.
+//!
 //! [`Basis::condition_number`] measures the conditioning of the real-stacked
 //! Vandermonde matrix of a basis on a set of lines; [`roots`] finds the roots of a
 //! polynomial given by its coefficients in the basis (companion-matrix eigenvalues),
