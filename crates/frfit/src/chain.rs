@@ -29,6 +29,7 @@ use frf_data::{
     RefineLink, Refiner,
 };
 use ml_refine::{MlConfig, MlRefine};
+use sk_fit::{SkConfig, SkInit};
 
 /// Options of the additive links that the pipeline sets beyond [`ChainSettings`].
 #[derive(Debug, Clone)]
@@ -98,6 +99,23 @@ fn make_cmif(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Initializer> {
     })
 }
 
+fn make_sk(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer> {
+    Box::new(InitLink {
+        name: "sk".into(),
+        estimator: SkInit::new(SkConfig {
+            order: s.order,
+            peaks: s.peaks.clone(),
+            hold: s.hold,
+            delay: s.delay,
+            derivative_order: s.derivative_order,
+            weighting: s.weighting.clone(),
+            precomputed: s.precomputed.clone(),
+            progress: s.progress.clone(),
+            ..Default::default()
+        }),
+    })
+}
+
 fn make_riv(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
     let mut riv = o.riv.clone();
     riv.weighting = s.weighting.clone();
@@ -125,11 +143,18 @@ fn make_ml(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
 }
 
 /// The initialisers frfit knows.
-pub const INITIALIZERS: &[InitEntry] = &[InitEntry {
-    name: "cmif",
-    description: "CMIF peaks + convex numerators (eq. 24 of the wafer-stage paper)",
-    make: make_cmif,
-}];
+pub const INITIALIZERS: &[InitEntry] = &[
+    InitEntry {
+        name: "cmif",
+        description: "CMIF peaks + convex numerators (eq. 24 of the wafer-stage paper)",
+        make: make_cmif,
+    },
+    InitEntry {
+        name: "sk",
+        description: "Sanathanan-Koerner common denominator (Jue 2.2, 2.4), order by F-test sweep, residues by least squares",
+        make: make_sk,
+    },
+];
 
 /// The refiners frfit knows.
 pub const REFINERS: &[RefineEntry] = &[
@@ -152,7 +177,7 @@ pub const REFINERS: &[RefineEntry] = &[
 
 /// Methods of the design that are not implemented yet, named in the error so that a
 /// user knows they are planned and what to use instead.
-const PLANNED_INIT: &[&str] = &["sk", "subspace"];
+const PLANNED_INIT: &[&str] = &["subspace"];
 const PLANNED_REFINE: &[&str] = &[];
 
 fn unknown(option: &str, name: &str, known: &[&str], planned: &[&str]) -> FrfitError {

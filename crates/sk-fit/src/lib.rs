@@ -1,7 +1,32 @@
 //! # sk-fit: Sanathanan-Koerner common-denominator fits
 //!
-//! Will hold (a later issue): SK iterations (Jue section 2.2, McKelvey eq. (36)-(38)) for
-//! a common-denominator MIMO model by stacking, with `1/|d|` and `1/sqrt|d|` weights,
-//! the bilinear prewarped basis of `poly-basis`, Bayard multi-band composite fitting
-//! with tiered weights, and Gilbert realization to a `realize::StateSpace`, all behind
-//! the `frf_data::Estimator` trait.
+//! The SK iterations of Jue (sections 2.2 and 2.4, eq. (2) and (4)) and McKelvey
+//! (eq. (36)-(38)) for MIMO frequency-response data with one common denominator and a
+//! numerator per entry, in a well-conditioned basis of `poly-basis` (the prewarped
+//! bilinear map, or the prewarped shift variable when the data were sampled through a
+//! zero-order hold, which makes the fit exact for sampled data):
+//!
+//! - [`sk_denominator`]: Levy start, then SK weights `1/|d|` (classic) or `1/sqrt|d|`
+//!   (Jue's default) times the data weight; per-entry numerators eliminated by a QR per
+//!   entry (cost linear in entries and lines); real coefficients;
+//! - [`fit_residues`]: with the poles fixed, residue matrices, integrators and
+//!   feedthrough by linear least squares (continuous or through the exact hold);
+//! - [`SkInit`]: the initialiser of the estimator chain (`frfit fit --init sk`): known
+//!   factors (delay, hold, derivative order), the order given or chosen by an F-test
+//!   sweep, poles mapped back to `s`, the model currency [`realize::FrfModel`].
+//!
+//! Not here (yet): Bayard's multi-band composite fit (Jue 2.3), Gilbert realization and
+//! balanced truncation.
+
+mod error;
+mod init;
+mod prepared;
+mod residues;
+mod sk;
+pub mod stats;
+
+pub use error::SkError;
+pub use init::{BasisChoice, OrderScore, SkConfig, SkInit, SkReport};
+pub use prepared::Prepared;
+pub use residues::{fit_residues, PoleSet};
+pub use sk::{sk_denominator, SkDenominator, SkIterConfig, SkWeight};
