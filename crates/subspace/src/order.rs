@@ -1,9 +1,11 @@
 //! The model order from the singular values of the projected data.
 //!
-//! Rule (documented in the crate README section of the repository): among the orders
-//! `n = 1 ..= n_max`, `n_max = min((r - 1) p, numerical rank)` (the shift equations (12)
-//! need `(r - 1) p >= n`), take the one with the largest gap `ln s_n - ln s_(n+1)`
-//! between consecutive singular values. The numerical rank counts the singular values
+//! Rule: among the orders `n = 1 ..= n_max`, `n_max = min((r - 1) p, numerical rank,
+//! max_order)` (the shift equations (12) need `(r - 1) p >= n`), take the one with the
+//! largest gap `ln s_n - ln s_(n+1)` between consecutive singular values. With the
+//! data's own variance as the weighting the noise level of the singular values is
+//! known (about 1), and the estimator counts the singular values above a multiple of
+//! it instead (`SubspaceConfig::noise_threshold`). The numerical rank counts the singular values
 //! above [`RANK_TOL`] times the largest: a given order above it is an error (the data
 //! do not support that many states).
 

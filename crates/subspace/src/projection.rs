@@ -21,14 +21,15 @@
 //! Noise weighting (the noise-covariance weighted variant): every column (line `k`,
 //! input `j`) of `[U; Y]` is scaled by `c_kj = 1 / sqrt(mean_o var_koj)`, which leaves
 //! the noise-free equation (8) exact (it scales `X` and `U` alike), and the rows by
-//! `Cov^{-1/2}`, with `Cov = sum_kj c_kj^2 Re(W_r(k) W_r(k)^H (x) diag_o var_koj)` the
-//! covariance of the noise of the rows (block Toeplitz, since `|xi_k| = 1`), through its
-//! Cholesky factor `L`: the SVD is taken of `L^{-1} Y Pi`, and `O_r = L U_n`. With the
-//! data's true variance the noise part of the weighted singular values is then about 1.
+//! `L^{-1}`, `L = diag(sqrt(t_o))` with `t_o = sum_kj c_kj^2 var_koj` the noise variance
+//! of the rows of output `o` (the diagonal of the row noise covariance
+//! `sum_kj c_kj^2 Re(W_r(k) W_r(k)^H (x) diag_o var_koj)`, equal for every power since
+//! `|xi_k| = 1`): the SVD is taken of `L^{-1} Y Pi`, and `O_r = L U_n`. With the data's
+//! true variance the noise part of the weighted singular values is then about 1.
 
 use crate::prepare::Prepared;
 use crate::SubspaceError;
-use faer::{Mat, Side};
+use faer::Mat;
 
 /// Lines per block of the running QR.
 pub const LINES_PER_BLOCK: usize = 192;
@@ -207,43 +208,38 @@ pub fn project(d: &Prepared, r: usize) -> Result<Projected, SubspaceError> {
     })
 }
 
-/// Cholesky factor of the row noise covariance (block diagonal over outputs, Toeplitz in
-/// the powers of `xi` since `|xi_k| = 1`).
+/// Square root of the diagonal of the row noise covariance (a diagonal `L`): the
+/// noise variance of the rows of output `o` is `t_o = sum_kj c_kj^2 var_koj` for every
+/// power of `xi` (since `|xi_k| = 1`). The off-diagonal (Toeplitz) part is left out:
+/// with the lines on an arc of the unit circle it is close to singular for more than a
+/// few block rows, and its inverse square root would amplify directions that hold
+/// neither signal nor noise.
 fn noise_cholesky(d: &Prepared, r: usize, cw: &[f64]) -> Result<Mat<f64>, SubspaceError> {
     let (p, nu, n) = (d.ny, d.nu, d.n_lines());
-    // t[o][dd] = sum_k v_o(k) cos(theta_k dd)
-    let mut t = vec![vec![0.0; r]; p];
+    let mut t = vec![0.0; p];
     for k in 0..n {
-        let theta = d.xi[k].arg();
-        for o in 0..p {
-            let mut v = 0.0;
+        for (o, to) in t.iter_mut().enumerate() {
             for j in 0..nu {
                 let c = cw[k * nu + j];
                 let var = d.var_h(k, j * p + o);
                 if c > 0.0 && var.is_finite() {
-                    v += c * c * var;
+                    *to += c * c * var;
                 }
-            }
-            for (dd, tv) in t[o].iter_mut().enumerate() {
-                *tv += v * (theta * dd as f64).cos();
             }
         }
     }
+    if let Some(o) = t.iter().position(|&x| !(x > 0.0 && x.is_finite())) {
+        return Err(SubspaceError::numerical(
+            "noise weighting of the rows",
+            format!("output {} has no line with a finite, positive variance", o + 1),
+        ));
+    }
     let rp = r * p;
-    let cov = Mat::from_fn(rp, rp, |a, b| {
-        let (i, o) = (a / p, a % p);
-        let (l, o2) = (b / p, b % p);
-        if o == o2 {
-            t[o][i.abs_diff(l)]
+    Ok(Mat::from_fn(rp, rp, |a, b| {
+        if a == b {
+            t[a % p].sqrt()
         } else {
             0.0
         }
-    });
-    let llt = cov.llt(Side::Lower).map_err(|_| {
-        SubspaceError::numerical(
-            "noise covariance of the rows",
-            "not positive definite (too few lines with a finite variance for the block rows)",
-        )
-    })?;
-    Ok(llt.L().to_owned())
+    }))
 }
