@@ -12,6 +12,13 @@
 //! wrong delay (rigid body, numerators, peaks) are redone with the refined delay as the
 //! start, and the better of the two chains (weighted cost on the data, the same
 //! criterion for every method) is kept; a note says so.
+//!
+//! `--init` may name several initialisers (`cmif,subspace`) or `auto` (every registered
+//! one, in registry order): each starts its own chain with the same refiner, and the
+//! chain kept is the one with the smallest final prediction error
+//! ([`final_prediction_error`]) on the data, so that a hard case (many modes, close
+//! pairs, hidden peaks) where one initialiser starts poorly falls back on another. Every
+//! run is reported in [`ChainResult::runs`] and in the notes.
 
 use crate::FrfitError;
 use additive_riv::structure::AdaptConfig;
@@ -178,8 +185,10 @@ pub struct ChainResult {
     pub chain: Vec<String>,
     /// Each link's report, in order (a redone chain reports the kept run).
     pub links: Vec<LinkReport>,
-    /// Notes of the chain itself (a redone start).
+    /// Notes of the chain itself (a redone start, the initialisers tried).
     pub notes: Vec<String>,
+    /// Every chain of a multi-initialiser run (empty for one initialiser).
+    pub runs: Vec<ChainRun>,
 }
 
 fn link_err(e: frf_data::ChainError) -> FrfitError {
@@ -206,18 +215,15 @@ fn run_once(
     Ok((first, second))
 }
 
-/// Runs `init` then `refine` on `data` (see the module documentation for the delay
-/// rule).
-pub fn run_chain(
+/// Runs the initialiser `init` then `refine` on `data` with the delay rule of the module
+/// documentation.
+fn run_single(
     data: DynData<'_>,
     init: &str,
     refine: &str,
     s: &ChainSettings,
     o: &AdditiveOptions,
 ) -> Result<ChainResult, FrfitError> {
-    // names are checked before any work
-    initializer(init, s, o)?;
-    refiner(refine, s, o)?;
     let (first, second) = run_once(data, init, refine, s, o)?;
     let mut notes = Vec::new();
     let finish = |first: ChainOutput, second: Option<ChainOutput>| {
@@ -253,6 +259,7 @@ pub fn run_chain(
             chain,
             links,
             notes,
+            runs: Vec::new(),
         });
     }
     let refined = end_delay.unwrap_or(start_delay);
@@ -278,6 +285,7 @@ pub fn run_chain(
                     chain: chain2,
                     links: links2,
                     notes,
+                    runs: Vec::new(),
                 });
             }
             notes.push(format!(
@@ -297,5 +305,215 @@ pub fn run_chain(
         chain,
         links,
         notes,
+        runs: Vec::new(),
     })
+}
+
+/// The initialisers an `--init` value names: one name, a comma-separated list, or
+/// `auto` (every registered initialiser, in registry order). Each name is checked.
+pub fn init_names(spec: &str) -> Result<Vec<String>, FrfitError> {
+    let names: Vec<String> = if spec.trim() == "auto" {
+        INITIALIZERS.iter().map(|e| e.name.to_string()).collect()
+    } else {
+        spec.split(',').map(|n| n.trim().to_string()).collect()
+    };
+    let known: Vec<&str> = INITIALIZERS.iter().map(|e| e.name).collect();
+    for (k, n) in names.iter().enumerate() {
+        if !known.contains(&n.as_str()) {
+            return Err(unknown("--init", n, &known, PLANNED_INIT));
+        }
+        if names[..k].contains(n) {
+            return Err(FrfitError::argument(
+                "--init",
+                spec,
+                format!("`{n}` is named twice"),
+            ));
+        }
+    }
+    Ok(names)
+}
+
+/// Akaike's final prediction error `V (N + p) / (N - p)` of a currency model on `data`:
+/// the weighted cost `V` ([`weighted_cost`]) corrected for the `p` real parameters the
+/// model spent on `N` real residuals (two per line and entry), so that a chain that
+/// fitted noise with more modes does not win by that alone. Infinite when `p >= N` or
+/// the model cannot be evaluated.
+pub fn final_prediction_error(
+    model: &ChainModel,
+    data: DynData<'_>,
+    weighting: &frf_data::Weighting,
+) -> f64 {
+    use frf_data::ModelStructure;
+    let n = 2.0 * (data.n_lines() * data.n_entries()) as f64;
+    let p = model.model.n_params() as f64;
+    match weighted_cost(&model.model, data, weighting) {
+        Ok(v) if n > p && v.is_finite() => v * (n + p) / (n - p),
+        _ => f64::INFINITY,
+    }
+}
+
+/// One chain of a multi-initialiser run (`--init cmif,subspace` or `auto`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ChainRun {
+    /// The chain's link names.
+    pub chain: Vec<String>,
+    /// Its weighted cost on the data ([`weighted_cost`]); `None` when it failed.
+    pub cost: Option<f64>,
+    /// Real parameters of its model.
+    pub n_params: Option<usize>,
+    /// Its final prediction error ([`final_prediction_error`]), the selection criterion.
+    pub fpe: Option<f64>,
+    /// Why it failed, when it did.
+    pub error: Option<String>,
+    /// Whether it is the chain kept.
+    pub kept: bool,
+}
+
+/// Runs the initialiser(s) named by `init` (one name, a comma-separated list or `auto`),
+/// each followed by `refine`, on `data`, and keeps the chain with the smallest final
+/// prediction error (see the module documentation). Names are checked before any work.
+/// With one initialiser this is that chain; with several, the run fails only when every
+/// chain failed (the errors are named).
+pub fn run_chain(
+    data: DynData<'_>,
+    init: &str,
+    refine: &str,
+    s: &ChainSettings,
+    o: &AdditiveOptions,
+) -> Result<ChainResult, FrfitError> {
+    let names = init_names(init)?;
+    refiner(refine, s, o)?;
+    if let [one] = names.as_slice() {
+        return run_single(data, one, refine, s, o);
+    }
+    use frf_data::ModelStructure;
+    let mut runs: Vec<ChainRun> = Vec::new();
+    let mut best: Option<(f64, ChainResult)> = None;
+    for name in &names {
+        match run_single(data, name, refine, s, o) {
+            Ok(r) => {
+                let fpe = final_prediction_error(&r.model, data, &s.weighting);
+                runs.push(ChainRun {
+                    chain: r.chain.clone(),
+                    cost: weighted_cost(&r.model.model, data, &s.weighting).ok(),
+                    n_params: Some(r.model.model.n_params()),
+                    fpe: Some(fpe),
+                    error: None,
+                    kept: false,
+                });
+                if best.as_ref().is_none_or(|(b, _)| fpe < *b) {
+                    best = Some((fpe, r));
+                }
+            }
+            Err(e) => runs.push(ChainRun {
+                chain: vec![name.clone(), refine.to_string()],
+                cost: None,
+                n_params: None,
+                fpe: None,
+                error: Some(e.to_string()),
+                kept: false,
+            }),
+        }
+    }
+    let Some((_, mut result)) = best else {
+        let why = runs
+            .iter()
+            .map(|r| {
+                format!(
+                    "{}: {}",
+                    r.chain.join("+"),
+                    r.error.as_deref().unwrap_or("")
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("; ");
+        return Err(FrfitError::Fit {
+            what: format!("--init {init}"),
+            why: format!("every chain failed ({why})"),
+        });
+    };
+    for r in &mut runs {
+        r.kept = r.chain == result.chain && r.error.is_none();
+    }
+    let listed = runs
+        .iter()
+        .map(|r| match (r.fpe, &r.error) {
+            (Some(f), _) => format!(
+                "{} FPE {f:.4e} ({} parameters){}",
+                r.chain.join("+"),
+                r.n_params.unwrap_or(0),
+                if r.kept { ", kept" } else { "" }
+            ),
+            (None, Some(e)) => format!("{} failed: {e}", r.chain.join("+")),
+            (None, None) => r.chain.join("+"),
+        })
+        .collect::<Vec<_>>()
+        .join("; ");
+    result.notes.push(format!(
+        "initialisers tried (smallest final prediction error kept): {listed}"
+    ));
+    result.runs = runs;
+    Ok(result)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frf_data::{Frf, Weighting};
+    use realize::{FrfModel, ModalModel, PolePair, C64};
+
+    #[test]
+    fn init_names_expand_auto_and_check_each_name() {
+        let all: Vec<String> = INITIALIZERS.iter().map(|e| e.name.to_string()).collect();
+        assert_eq!(init_names("auto").unwrap(), all);
+        assert_eq!(init_names("cmif").unwrap(), vec!["cmif".to_string()]);
+        let e = init_names("cmif,bogus").unwrap_err().to_string();
+        assert!(e.contains("bogus") && e.contains("available: cmif"), "{e}");
+        let e = init_names("cmif, cmif").unwrap_err().to_string();
+        assert!(e.contains("named twice"), "{e}");
+    }
+
+    /// A 1 x 1 one-mode model and its response on 50 lines, with a perturbation of
+    /// relative size `eps` on every line.
+    fn one_mode(eps: f64) -> (FrfModel, Frf) {
+        let mut m = ModalModel::new(1, 1);
+        m.pairs.push(PolePair::from_f_zeta(
+            10.0,
+            0.02,
+            faer::Mat::from_fn(1, 1, |_, _| C64::new(0.0, -3.0)),
+        ));
+        let model = FrfModel::new(m);
+        let f: Vec<f64> = (1..=50).map(|k| k as f64 * 0.4).collect();
+        let w: Vec<f64> = f.iter().map(|f| std::f64::consts::TAU * f).collect();
+        let g = model.freq_response(&w).unwrap();
+        let values: Vec<C64> = (0..f.len())
+            .map(|k| g.get(k, 0, 0) * (1.0 + eps * if k % 2 == 0 { 1.0 } else { -1.0 }))
+            .collect();
+        (model, Frf::new(f, 1, 1, values, None).unwrap())
+    }
+
+    #[test]
+    fn final_prediction_error_is_zero_for_the_exact_model_and_charges_parameters() {
+        let (model, data) = one_mode(0.0);
+        let cm = ChainModel::from(model.clone());
+        assert_eq!(final_prediction_error(&cm, &data, &Weighting::Uniform), 0.0);
+        let (_, noisy) = one_mode(1e-3);
+        let v = weighted_cost(&model, &noisy, &Weighting::Uniform).unwrap();
+        let fpe = final_prediction_error(&cm, &noisy, &Weighting::Uniform);
+        // 1 x 1, one pair: p = 2 + 2 + 1 (feedthrough) = 5 real parameters on N = 100
+        let (n, p) = (100.0, 5.0);
+        assert!(
+            (fpe - v * (n + p) / (n - p)).abs() <= 1e-12 * fpe,
+            "{fpe} {v}"
+        );
+        // the same cost with a spare (zero-residue) mode costs more
+        let mut bigger = model.clone();
+        bigger.modal.pairs.push(PolePair::from_f_zeta(
+            15.0,
+            0.02,
+            faer::Mat::from_fn(1, 1, |_, _| C64::new(0.0, 0.0)),
+        ));
+        let fpe2 = final_prediction_error(&ChainModel::from(bigger), &noisy, &Weighting::Uniform);
+        assert!(fpe2 > fpe, "{fpe2} <= {fpe}");
+    }
 }

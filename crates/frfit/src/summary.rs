@@ -188,4 +188,9 @@ pub struct Summary {
     /// `provenance.links`.
     #[serde(default)]
     pub chain: Vec<String>,
+    /// Every chain tried when `--init` named several initialisers (`auto`), with its
+    /// cost, parameter count and final prediction error, and which was kept; empty
+    /// otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub chain_runs: Vec<crate::chain::ChainRun>,
 }

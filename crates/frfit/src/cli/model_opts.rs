@@ -129,13 +129,19 @@ pub struct FitOptions {
     /// Iterations: refined IV (riv) or SK.
     #[arg(long, value_enum, default_value_t = Method::Riv)]
     pub method: Method,
-    /// Initialiser of the estimator chain: `cmif` (CMIF peaks + convex numerators).
-    #[arg(long, default_value = "cmif", value_name = "NAME")]
+    /// Initialiser of the estimator chain: `cmif` (CMIF peaks + convex numerators), a
+    /// comma-separated list of initialisers (each starts a chain; the one with the
+    /// smallest final prediction error is kept), or `auto` (every initialiser).
+    #[arg(long, default_value = "cmif", value_name = "NAME[,NAME..]|auto")]
     pub init: String,
     /// Refiner of the estimator chain: `riv` (refined IV with mode adaptation) or `none`
     /// (the initialiser's model as it is).
     #[arg(long, default_value = "riv", value_name = "NAME")]
     pub refine: String,
+    /// Model order (number of states) for the initialisers that take one (sk,
+    /// subspace); default: chosen from the data.
+    #[arg(long, value_name = "N")]
+    pub order: Option<usize>,
     /// Weighting of the criterion.
     #[arg(long, value_enum, default_value_t = WeightingArg::Auto)]
     pub weighting: WeightingArg,
@@ -166,6 +172,7 @@ impl FitOptions {
             },
             init: self.init.clone(),
             refine: self.refine.clone(),
+            order: self.order,
             frf_type: match self.frf_type {
                 FrfTypeArg::Displacement => FrfType::Displacement,
                 FrfTypeArg::Velocity => FrfType::Velocity,

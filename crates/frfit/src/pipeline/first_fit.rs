@@ -18,6 +18,8 @@ pub struct FirstFit {
     pub chain: Vec<String>,
     /// Each link's report.
     pub links: Vec<LinkReport>,
+    /// Every chain tried when `--init` named several initialisers.
+    pub chain_runs: Vec<crate::chain::ChainRun>,
 }
 
 /// Fits the band of `ctx` with the settings of `cfg`.
@@ -40,6 +42,7 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
             report: FitterReport::default(),
             chain: Vec::new(),
             links: Vec::new(),
+            chain_runs: Vec::new(),
         });
     }
     let fc = ctx.fitter_config(cfg);
@@ -50,7 +53,7 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
         weighting: fc.riv.weighting.clone(),
         modes: fc.modes.clone(),
         peaks: fc.peaks.clone(),
-        order: None,
+        order: cfg.order,
         progress: fc.progress.clone(),
     };
     let opts = AdditiveOptions {
@@ -121,5 +124,6 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
         report,
         chain: result.chain,
         links: result.links,
+        chain_runs: result.runs,
     })
 }

@@ -108,6 +108,9 @@ pub struct PipelineConfig {
     pub init: String,
     /// The refiner of the chain (see [`crate::chain::REFINERS`]). Default: `riv`.
     pub refine: String,
+    /// Model order (number of states) for initialisers that take one (SK, subspace);
+    /// `None` lets them choose it from the data. Default: `None`.
+    pub order: Option<usize>,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -130,6 +133,7 @@ impl Default for PipelineConfig {
             start_model: None,
             init: "cmif".into(),
             refine: "riv".into(),
+            order: None,
             progress: ProgressSink::none(),
         }
     }
@@ -292,6 +296,7 @@ pub fn run(
             final_errors,
             timings: timings.0,
             chain: first.chain.clone(),
+            chain_runs: first.chain_runs.clone(),
         },
     );
     let peaks = fitter_report.cmif_peaks.clone();

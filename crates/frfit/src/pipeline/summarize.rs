@@ -195,6 +195,8 @@ pub(crate) struct RunRecord<'a> {
     pub timings: Vec<StageTime>,
     /// The estimator chain of the first fit.
     pub chain: Vec<String>,
+    /// Every chain tried by a multi-initialiser first fit.
+    pub chain_runs: Vec<crate::chain::ChainRun>,
 }
 
 /// The summary of a run on `ctx` with `cfg`.
@@ -244,5 +246,6 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
             .flatten(),
         timings: run.timings,
         chain: run.chain,
+        chain_runs: run.chain_runs,
     }
 }

@@ -123,7 +123,18 @@ pub fn random_modal(seed: u64, spec: Spec) -> (ModalModel, usize) {
             // R_1, R_2 add none beyond the block-triangular Hankel's rank).
             let r1 = random_real_rank(&mut r, ny, nu, maxr);
             let r2 = random_real_rank(&mut r, ny, nu, maxr);
-            let r3 = random_real_rank(&mut r, ny, nu, maxr);
+            // R_3 is drawn again until its condition number is below 100: the smallest
+            // Hankel singular value scales like sigma_min(R_3)^3, and a nearly singular
+            // R_3 (seen: condition 6e4) makes the numerical rank at 1e-12 lower than
+            // 3 min(ny, nu), which is then the right minimal order, not the one counted here.
+            let mut r3 = random_real_rank(&mut r, ny, nu, maxr);
+            for _ in 0..1000 {
+                let sv = r3.singular_values().expect("SVD of a small finite matrix");
+                if sv[maxr - 1] > 1e-2 * sv[0] {
+                    break;
+                }
+                r3 = random_real_rank(&mut r, ny, nu, maxr);
+            }
             m.rigid = vec![r1, r2, r3];
             order += 3 * maxr;
         }
