@@ -92,6 +92,21 @@ fn make_cmif(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Initializer> {
     })
 }
 
+fn make_subspace(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer> {
+    Box::new(InitLink {
+        name: "subspace".into(),
+        estimator: subspace::SubspaceInit::new(subspace::SubspaceConfig {
+            hold: s.hold,
+            delay: s.delay,
+            derivative_order: s.derivative_order,
+            weighting: s.weighting.clone(),
+            order: s.order,
+            progress: s.progress.clone(),
+            ..Default::default()
+        }),
+    })
+}
+
 fn make_riv(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
     let mut riv = o.riv.clone();
     riv.weighting = s.weighting.clone();
@@ -107,11 +122,19 @@ fn make_riv(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
 }
 
 /// The initialisers frfit knows.
-pub const INITIALIZERS: &[InitEntry] = &[InitEntry {
-    name: "cmif",
-    description: "CMIF peaks + convex numerators (eq. 24 of the wafer-stage paper)",
-    make: make_cmif,
-}];
+pub const INITIALIZERS: &[InitEntry] = &[
+    InitEntry {
+        name: "cmif",
+        description: "CMIF peaks + convex numerators (eq. 24 of the wafer-stage paper)",
+        make: make_cmif,
+    },
+    InitEntry {
+        name: "subspace",
+        description:
+            "frequency-domain subspace (McKelvey): z-domain through the hold, bilinear otherwise",
+        make: make_subspace,
+    },
+];
 
 /// The refiners frfit knows.
 pub const REFINERS: &[RefineEntry] = &[
@@ -129,7 +152,7 @@ pub const REFINERS: &[RefineEntry] = &[
 
 /// Methods of the design that are not implemented yet, named in the error so that a
 /// user knows they are planned and what to use instead.
-const PLANNED_INIT: &[&str] = &["sk", "subspace"];
+const PLANNED_INIT: &[&str] = &["sk"];
 const PLANNED_REFINE: &[&str] = &["ml"];
 
 fn unknown(option: &str, name: &str, known: &[&str], planned: &[&str]) -> FrfitError {

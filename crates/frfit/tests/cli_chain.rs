@@ -16,7 +16,7 @@ fn unknown_and_planned_methods_name_the_choices() {
     let model = dir.join("m.json");
     for (opt, name, says) in [
         ("--init", "bogus", "unknown method; available: cmif"),
-        ("--init", "subspace", "not implemented in this version"),
+        ("--init", "sk", "not implemented in this version"),
         ("--refine", "bogus", "available: riv, none"),
         ("--refine", "ml", "not implemented in this version"),
     ] {

@@ -54,13 +54,16 @@ pub struct PoleSet {
 /// Classifies the eigenvalues `eig` of the identified `A` (see the module
 /// documentation). `omega_min` is the lowest line (rad/s); poles with
 /// `|s| < rigid_fraction * omega_min` are integrators, at most `max_integrators` of
-/// them in the rigid-body part.
+/// them in the rigid-body part. Poles within `merge_tol` (relative) of each other are
+/// one pole with a residue of higher rank (a minimal state space repeats a pole once
+/// per rank of its residue).
 pub fn classify(
     eig: &[C64],
     variable: Variable,
     omega_min: f64,
     rigid_fraction: f64,
     max_integrators: usize,
+    merge_tol: f64,
 ) -> PoleSet {
     let mut ps = PoleSet::default();
     for &l in eig {
@@ -77,7 +80,8 @@ pub fn classify(
         }
         let mut s = variable.to_s(if is_real_eig { C64::new(l.re, 0.0) } else { l });
         if !(s.re.is_finite() && s.im.is_finite()) {
-            ps.notes.push(format!("eigenvalue {l} maps to an infinite pole: left out"));
+            ps.notes
+                .push(format!("eigenvalue {l} maps to an infinite pole: left out"));
             continue;
         }
         if s.norm() < rigid_fraction * omega_min {
@@ -104,7 +108,39 @@ pub fn classify(
     ps.integrators = ps.at_origin.min(max_integrators);
     ps.pairs.sort_by(|a, b| a.norm().total_cmp(&b.norm()));
     ps.reals.sort_by(|a, b| b.total_cmp(a));
+    let (pairs, merged_p) = merge(&ps.pairs, merge_tol, |z| z);
+    let reals_c: Vec<C64> = ps.reals.iter().map(|&x| C64::new(x, 0.0)).collect();
+    let (reals, merged_r) = merge(&reals_c, merge_tol, |z| z);
+    if merged_p + merged_r > 0 {
+        ps.notes.push(format!(
+            "{} repeated poles (a residue of rank > 1, or a pole split by noise; within {merge_tol:.0e} relative) merged: one residue matrix each",
+            merged_p + merged_r
+        ));
+    }
+    ps.pairs = pairs;
+    ps.reals = reals.into_iter().map(|z| z.re).collect();
     ps
+}
+
+/// Merges poles (sorted by modulus) closer than `tol` relative into their mean;
+/// returns the poles and how many were merged away.
+fn merge(poles: &[C64], tol: f64, f: impl Fn(C64) -> C64) -> (Vec<C64>, usize) {
+    let mut out: Vec<(C64, usize)> = Vec::new();
+    let mut merged = 0;
+    for &p in poles {
+        let p = f(p);
+        if let Some(last) = out
+            .iter_mut()
+            .find(|(q, c)| ((*q / *c as f64) - p).norm() <= tol * p.norm())
+        {
+            last.0 += p;
+            last.1 += 1;
+            merged += 1;
+        } else {
+            out.push((p, 1));
+        }
+    }
+    (out.into_iter().map(|(s, c)| s / c as f64).collect(), merged)
 }
 
 /// One basis term of the currency: which coefficient it multiplies.
@@ -221,7 +257,10 @@ pub fn fit_residues(
         }
         let scale: Vec<f64> = (0..nb)
             .map(|q| {
-                let s = (0..2 * nl).map(|r| a[(r, q)] * a[(r, q)]).sum::<f64>().sqrt();
+                let s = (0..2 * nl)
+                    .map(|r| a[(r, q)] * a[(r, q)])
+                    .sum::<f64>()
+                    .sqrt();
                 if s > 0.0 {
                     s
                 } else {

@@ -54,6 +54,9 @@ pub struct SubspaceConfig {
     /// noise level (to 0.67 of the lowest line on the reference wafer stage, whose
     /// relative noise is ~1e-3). Default: 0.75.
     pub rigid_fraction: f64,
+    /// Poles closer than this (relative) are one pole whose residue has rank > 1 (a
+    /// minimal state space repeats such a pole once per rank). Default: 1e-3.
+    pub merge_tol: f64,
     /// With the data's own variance as the weighting (the noise part of the weighted
     /// singular values is then about 1), the order is the number of singular values
     /// above this level; otherwise (and when none is above it) the largest gap decides.
@@ -79,6 +82,7 @@ impl Default for SubspaceConfig {
             rigid_fraction: 0.75,
             max_integrators: 2,
             noise_threshold: 4.0,
+            merge_tol: 1e-3,
             progress: ProgressSink::none(),
         }
     }
@@ -183,6 +187,13 @@ impl SubspaceInit {
         if c.order == Some(0) {
             return Err(SubspaceError::invalid("order", 0, "must be >= 1 state"));
         }
+        if !(c.merge_tol.is_finite() && (0.0..0.1).contains(&c.merge_tol)) {
+            return Err(SubspaceError::invalid(
+                "merge_tol",
+                c.merge_tol,
+                "must be in [0, 0.1)",
+            ));
+        }
         if !(c.noise_threshold.is_finite() && c.noise_threshold > 0.0) {
             return Err(SubspaceError::invalid(
                 "noise_threshold",
@@ -227,7 +238,8 @@ impl SubspaceInit {
             });
         }
         // 1. the known factor
-        cfg.progress.step("subspace", 1, Some(4), None, "known factor");
+        cfg.progress
+            .step("subspace", 1, Some(4), None, "known factor");
         let hold_share = match cfg.hold {
             Hold::Zoh { fs_hz } => 0.5 / fs_hz,
             _ => 0.0,
@@ -253,7 +265,11 @@ impl SubspaceInit {
             }
         };
         if !delay_s.is_finite() {
-            return Err(SubspaceError::invalid("delay (s)", delay_s, "must be finite"));
+            return Err(SubspaceError::invalid(
+                "delay (s)",
+                delay_s,
+                "must be finite",
+            ));
         }
         let factors = KnownFactors {
             delay_s,
@@ -360,13 +376,9 @@ impl SubspaceInit {
         let t = Instant::now();
         let (b, d, cond_bd, ss_cost) = fit_b_d(&prepared, &a, &c)?;
         let state_space = match prepared.variable {
-            Variable::Shift { ts } => StateSpace::new(
-                a.clone(),
-                b,
-                c,
-                d,
-                TimeDomain::Discrete { ts },
-            )?,
+            Variable::Shift { ts } => {
+                StateSpace::new(a.clone(), b, c, d, TimeDomain::Discrete { ts })?
+            }
             Variable::Bilinear { t } => bilinear_to_continuous(&a, &b, &c, &d, t)?,
         };
         timings.push(("B, D (17)".to_string(), t.elapsed().as_secs_f64()));
@@ -382,6 +394,7 @@ impl SubspaceInit {
             prepared.omega[0],
             cfg.rigid_fraction,
             cfg.max_integrators,
+            cfg.merge_tol,
         );
         messages.extend(ps.notes.iter().cloned());
         for rp in &ps.reflected {
@@ -397,15 +410,8 @@ impl SubspaceInit {
             ));
         }
         let g = data.values_vec();
-        let (model, cond_res) = fit_residues(
-            ny,
-            nu,
-            &prepared.omega,
-            &g,
-            &prepared.w,
-            &ps,
-            &factors,
-        )?;
+        let (model, cond_res) =
+            fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)?;
         timings.push(("residues".to_string(), t.elapsed().as_secs_f64()));
         let cost = weighted_cost(&model, data, &weighting)?;
         timings.push(("total".to_string(), t0.elapsed().as_secs_f64()));

@@ -128,7 +128,9 @@ pub fn prepare<D: FrfDataset + ?Sized>(
                 return Err(SubspaceError::invalid(
                     "hold sample rate (Hz)",
                     fs_hz,
-                    format!("the exact hold needs every line below Nyquist; the data reach {hi} Hz"),
+                    format!(
+                        "the exact hold needs every line below Nyquist; the data reach {hi} Hz"
+                    ),
                 ));
             }
             Variable::Shift { ts: 1.0 / fs_hz }
@@ -138,9 +140,8 @@ pub fn prepare<D: FrfDataset + ?Sized>(
                 omega.first().copied().unwrap_or(1.0),
                 omega.last().copied().unwrap_or(1.0),
             );
-            Variable::Bilinear {
-                t: 2.0 / (lo * hi).sqrt(),
-            }
+            let _ = lo;
+            Variable::Bilinear { t: 2.0 / hi }
         }
     };
     let resolved = weighting.resolve(data);

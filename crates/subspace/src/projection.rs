@@ -188,9 +188,9 @@ pub fn project(d: &Prepared, r: usize) -> Result<Projected, SubspaceError> {
         }
         None => acc,
     };
-    let svd = m.thin_svd().map_err(|e| {
-        SubspaceError::numerical("SVD of the projected data", format!("{e:?}"))
-    })?;
+    let svd = m
+        .thin_svd()
+        .map_err(|e| SubspaceError::numerical("SVD of the projected data", format!("{e:?}")))?;
     let s = svd.S().column_vector();
     let singular_values: Vec<f64> = (0..rp).map(|i| s[i]).collect();
     if singular_values.iter().any(|x| !x.is_finite()) {
@@ -231,7 +231,10 @@ fn noise_cholesky(d: &Prepared, r: usize, cw: &[f64]) -> Result<Mat<f64>, Subspa
     if let Some(o) = t.iter().position(|&x| !(x > 0.0 && x.is_finite())) {
         return Err(SubspaceError::numerical(
             "noise weighting of the rows",
-            format!("output {} has no line with a finite, positive variance", o + 1),
+            format!(
+                "output {} has no line with a finite, positive variance",
+                o + 1
+            ),
         ));
     }
     let rp = r * p;

@@ -96,7 +96,10 @@ pub fn fit_b_d(
         // column scaling for the conditioning of the solve
         let scale: Vec<f64> = (0..nc)
             .map(|q| {
-                let s = (0..m.nrows()).map(|i| m[(i, q)] * m[(i, q)]).sum::<f64>().sqrt();
+                let s = (0..m.nrows())
+                    .map(|i| m[(i, q)] * m[(i, q)])
+                    .sum::<f64>()
+                    .sqrt();
                 if s > 0.0 {
                     s
                 } else {

@@ -66,7 +66,10 @@ fn noiseless_wafer_is_reproduced() {
         "noiseless wafer: order {} ({}), {} pairs, {} integrators, median {median:.3e}, p95 {p95:.3e}, cond {:?}, timings {:?}",
         r.order, r.order_rule, r.pairs, r.integrators, r.conditioning, id.timings
     );
-    println!("singular values: {:?}", &r.singular_values[..45.min(r.singular_values.len())]);
+    println!(
+        "singular values: {:?}",
+        &r.singular_values[..45.min(r.singular_values.len())]
+    );
     assert!(median <= 1e-6, "median relative error {median:.3e}");
 }
 
@@ -97,7 +100,10 @@ fn noisy_wafer_modes_and_error() {
         "noisy wafer: order {} ({}), {} pairs, {} real, {} integrators, {matched}/17 modes within 0.5 % (worst {worst:.2e}), median {median:.3e}, p95 {p95:.3e} vs noiseless, reflected {}, cond {:?}, timings {:?}",
         r.order, r.order_rule, r.pairs, r.real_poles, r.integrators, r.reflected_poles.len(), r.conditioning, id.timings
     );
-    println!("singular values: {:?}", &r.singular_values[..50.min(r.singular_values.len())]);
+    println!(
+        "singular values: {:?}",
+        &r.singular_values[..50.min(r.singular_values.len())]
+    );
     assert_eq!(matched, 17, "modes within 0.5 %");
     assert!(median <= 1e-3, "median relative error {median:.3e}");
 }
