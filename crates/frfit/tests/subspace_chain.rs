@@ -40,8 +40,14 @@ fn subspace_then_riv_on_the_wafer_stage() {
     let mut medians = Vec::new();
     for refine in ["none", "riv"] {
         let t = std::time::Instant::now();
-        let r = run_chain(&band, "subspace", refine, &settings, &AdditiveOptions::default())
-            .unwrap_or_else(|e| panic!("subspace+{refine}: {e}"));
+        let r = run_chain(
+            &band,
+            "subspace",
+            refine,
+            &settings,
+            &AdditiveOptions::default(),
+        )
+        .unwrap_or_else(|e| panic!("subspace+{refine}: {e}"));
         let (median, p95) = r
             .model
             .model
@@ -56,6 +62,14 @@ fn subspace_then_riv_on_the_wafer_stage() {
         assert_eq!(r.chain, vec!["subspace".to_string(), refine.to_string()]);
         medians.push(median);
     }
-    assert!(medians[0] <= 1e-3, "subspace alone: median {:.3e}", medians[0]);
-    assert!(medians[1] <= 6e-6, "subspace + riv: median {:.3e}", medians[1]);
+    assert!(
+        medians[0] <= 1e-3,
+        "subspace alone: median {:.3e}",
+        medians[0]
+    );
+    assert!(
+        medians[1] <= 6e-6,
+        "subspace + riv: median {:.3e}",
+        medians[1]
+    );
 }
