@@ -111,7 +111,11 @@ fn r_factor(m: &Mat<f64>, nc: usize) -> Result<Mat<f64>, SubspaceError> {
 }
 
 /// Running QR: factors `[r; block]` and returns the new triangle.
-fn absorb(r: &Mat<f64>, block: &Mat<f64>, rows: usize) -> Result<Mat<f64>, SubspaceError> {
+pub(crate) fn absorb(
+    r: &Mat<f64>,
+    block: &Mat<f64>,
+    rows: usize,
+) -> Result<Mat<f64>, SubspaceError> {
     let nc = r.ncols();
     let m = Mat::from_fn(nc + rows, nc, |i, j| {
         if i < nc {

@@ -65,65 +65,81 @@ pub fn fit_b_d(
     let mut worst = 1.0f64;
     let mut cost = 0.0;
     let nc = n + p;
+    // column scales (norms of the weighted regressor columns), then a running QR of the
+    // augmented regressor [M | y] over blocks of lines: R holds the solution and the
+    // residual norm, and nothing grows with the lines
+    let blk = crate::projection::LINES_PER_BLOCK;
+    let weight = |k: usize, e: usize| -> f64 {
+        if d.uniform {
+            1.0
+        } else {
+            let v = d.var_h(k, e);
+            if v.is_finite() {
+                1.0 / v
+            } else {
+                0.0
+            }
+        }
+    };
     for j in 0..nu {
-        let mut m = Mat::<f64>::zeros(2 * nl * p, nc);
-        let mut y = Mat::<f64>::zeros(2 * nl * p, 1);
+        let mut scale = vec![0.0; nc];
         for k in 0..nl {
             for o in 0..p {
-                let w = if d.uniform {
-                    1.0
-                } else {
-                    let v = d.var_h(k, j * p + o);
-                    if v.is_finite() {
-                        1.0 / v
-                    } else {
-                        0.0
-                    }
-                };
-                let sw = w.sqrt();
-                let (re, im) = (2 * (k * p + o), 2 * (k * p + o) + 1);
+                let w = weight(k, j * p + o);
                 for l in 0..n {
-                    let f = phi.get(k, o, l) * sw;
-                    m[(re, l)] = f.re;
-                    m[(im, l)] = f.im;
+                    scale[l] += w * phi.get(k, o, l).norm_sqr();
                 }
-                m[(re, n + o)] = sw;
-                let h = d.h[k * p * nu + j * p + o] * sw;
-                y[(re, 0)] = h.re;
-                y[(im, 0)] = h.im;
+                scale[n + o] += w;
             }
         }
-        // column scaling for the conditioning of the solve
-        let scale: Vec<f64> = (0..nc)
-            .map(|q| {
-                let s = (0..m.nrows())
-                    .map(|i| m[(i, q)] * m[(i, q)])
-                    .sum::<f64>()
-                    .sqrt();
-                if s > 0.0 {
-                    s
-                } else {
-                    1.0
-                }
-            })
-            .collect();
-        for q in 0..nc {
-            for i in 0..m.nrows() {
-                m[(i, q)] /= scale[q];
-            }
+        for s in scale.iter_mut() {
+            *s = if *s > 0.0 { s.sqrt() } else { 1.0 };
         }
-        let qr = m.qr();
-        let rr = qr.thin_R().to_owned();
+        let mut r = Mat::<f64>::zeros(nc + 1, nc + 1);
+        let mut block = Mat::<f64>::zeros(2 * blk * p, nc + 1);
+        let mut k0 = 0;
+        while k0 < nl {
+            let k1 = (k0 + blk).min(nl);
+            for k in k0..k1 {
+                for o in 0..p {
+                    let sw = weight(k, j * p + o).sqrt();
+                    let (re, im) = (2 * ((k - k0) * p + o), 2 * ((k - k0) * p + o) + 1);
+                    for l in 0..n {
+                        let f = phi.get(k, o, l) * (sw / scale[l]);
+                        block[(re, l)] = f.re;
+                        block[(im, l)] = f.im;
+                    }
+                    for q in 0..p {
+                        let v = if q == o { sw / scale[n + o] } else { 0.0 };
+                        block[(re, n + q)] = v;
+                        block[(im, n + q)] = 0.0;
+                    }
+                    let h = d.h[k * p * nu + j * p + o] * sw;
+                    block[(re, nc)] = h.re;
+                    block[(im, nc)] = h.im;
+                }
+            }
+            r = crate::projection::absorb(&r, &block, 2 * p * (k1 - k0))?;
+            k0 = k1;
+        }
+        let rr = Mat::from_fn(nc, nc, |a, b| r[(a, b)]);
         worst = worst.max(condition(&rr));
-        let x = qr.solve_lstsq(&y);
+        // back substitution R x = R[:, nc]
+        let mut x = vec![0.0; nc];
+        for i in (0..nc).rev() {
+            let mut acc = r[(i, nc)];
+            for q in i + 1..nc {
+                acc -= r[(i, q)] * x[q];
+            }
+            x[i] = acc / r[(i, i)];
+        }
         for l in 0..n {
-            b[(l, j)] = x[(l, 0)] / scale[l];
+            b[(l, j)] = x[l] / scale[l];
         }
         for o in 0..p {
-            dd[(o, j)] = x[(n + o, 0)] / scale[n + o];
+            dd[(o, j)] = x[n + o] / scale[n + o];
         }
-        let res = &m * &x - &y;
-        cost += (0..res.nrows()).map(|i| res[(i, 0)].powi(2)).sum::<f64>();
+        cost += r[(nc, nc)] * r[(nc, nc)];
     }
     if (0..nu).any(|j| (0..n).any(|l| !b[(l, j)].is_finite())) {
         return Err(SubspaceError::numerical(
