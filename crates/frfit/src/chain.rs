@@ -116,6 +116,21 @@ fn make_sk(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer> {
     })
 }
 
+fn make_subspace(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer> {
+    Box::new(InitLink {
+        name: "subspace".into(),
+        estimator: subspace::SubspaceInit::new(subspace::SubspaceConfig {
+            hold: s.hold,
+            delay: s.delay,
+            derivative_order: s.derivative_order,
+            weighting: s.weighting.clone(),
+            order: s.order,
+            progress: s.progress.clone(),
+            ..Default::default()
+        }),
+    })
+}
+
 fn make_riv(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
     let mut riv = o.riv.clone();
     riv.weighting = s.weighting.clone();
@@ -150,6 +165,12 @@ pub const INITIALIZERS: &[InitEntry] = &[
         make: make_cmif,
     },
     InitEntry {
+        name: "subspace",
+        description:
+            "frequency-domain subspace (McKelvey): z-domain through the hold, bilinear otherwise",
+        make: make_subspace,
+    },
+    InitEntry {
         name: "sk",
         description: "Sanathanan-Koerner common denominator (Jue 2.2, 2.4), order by F-test sweep, residues by least squares",
         make: make_sk,
@@ -175,21 +196,13 @@ pub const REFINERS: &[RefineEntry] = &[
     },
 ];
 
-/// Methods of the design that are not implemented yet, named in the error so that a
-/// user knows they are planned and what to use instead.
-const PLANNED_INIT: &[&str] = &["subspace"];
-const PLANNED_REFINE: &[&str] = &[];
-
-fn unknown(option: &str, name: &str, known: &[&str], planned: &[&str]) -> FrfitError {
-    let why = if planned.contains(&name) {
-        format!(
-            "`{name}` is not implemented in this version of frfit; available: {}",
-            known.join(", ")
-        )
-    } else {
-        format!("unknown method; available: {}", known.join(", "))
-    };
-    FrfitError::argument(option, name, &why)
+/// The error of a method name that is not registered, listing those that are.
+fn unknown(option: &str, name: &str, known: &[&str]) -> FrfitError {
+    FrfitError::argument(
+        option,
+        name,
+        format!("unknown method; available: {}", known.join(", ")),
+    )
 }
 
 /// The initialiser registered as `name`.
@@ -204,7 +217,7 @@ pub fn initializer(
         .map(|e| (e.make)(s, o))
         .ok_or_else(|| {
             let known: Vec<&str> = INITIALIZERS.iter().map(|e| e.name).collect();
-            unknown("--init", name, &known, PLANNED_INIT)
+            unknown("--init", name, &known)
         })
 }
 
@@ -220,7 +233,7 @@ pub fn refiner(
         .map(|e| e.make.map(|m| m(s, o)))
         .ok_or_else(|| {
             let known: Vec<&str> = REFINERS.iter().map(|e| e.name).collect();
-            unknown("--refine", name, &known, PLANNED_REFINE)
+            unknown("--refine", name, &known)
         })
 }
 
@@ -368,7 +381,11 @@ pub fn init_names(spec: &str) -> Result<Vec<String>, FrfitError> {
     let known: Vec<&str> = INITIALIZERS.iter().map(|e| e.name).collect();
     for (k, n) in names.iter().enumerate() {
         if !known.contains(&n.as_str()) {
-            return Err(unknown("--init", n, &known, PLANNED_INIT));
+            return Err(FrfitError::argument(
+                "--init",
+                spec,
+                format!("unknown method `{n}`; available: {}", known.join(", ")),
+            ));
         }
         if names[..k].contains(n) {
             return Err(FrfitError::argument(

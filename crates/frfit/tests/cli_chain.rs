@@ -10,14 +10,14 @@ fn read_json(path: &std::path::Path) -> serde_json::Value {
 }
 
 #[test]
-fn unknown_and_planned_methods_name_the_choices() {
+fn unknown_methods_name_the_choices() {
     let dir = temp_dir("chain-names");
     let csv = write_plant(&dir, 0.0);
     let model = dir.join("m.json");
     for (opt, name, says) in [
-        ("--init", "bogus", "unknown method; available: cmif"),
-        ("--init", "subspace", "not implemented in this version"),
-        ("--refine", "bogus", "available: riv, none"),
+        ("--init", "bogus", "unknown method; available: cmif, subspace, sk"),
+        ("--init", "cmif,bogus", "unknown method `bogus`; available: cmif, subspace, sk"),
+        ("--refine", "bogus", "available: riv, none, ml"),
     ] {
         let o = run(&[
             "fit",

@@ -1,6 +1,32 @@
 //! # subspace: frequency-domain subspace identification
 //!
-//! Will hold (a later issue): the frequency-domain subspace algorithm of McKelvey and of
-//! Pintelon-Schoukens (eq. (3)-(16)), discrete and continuous time (bilinear map),
-//! noise-covariance weighting, model order from the singular values, and B/D by least
-//! squares (eq. 17), behind the `frf_data::Estimator` trait (an initialiser).
+//! The frequency-domain subspace algorithm for MIMO FRF data (McKelvey, Akcay and Ljung
+//! 1996; Pintelon & Schoukens, "Frequency domain subspace algorithms", model (3), data
+//! equations (6)-(11), shift structure (12), least squares (17)), as an initialiser of
+//! the estimator chain (`frfit fit --init subspace`):
+//!
+//! 1. [`prepare`]: the known factor (delay, derivative order) divided out; the variable
+//!    `z = exp(j w Ts)` for a declared zero-order hold (the ZOH plant is exactly a
+//!    discrete state space), otherwise the prewarped bilinear variable of McKelvey's
+//!    eq. (39);
+//! 2. [`projection`]: the real data matrix (10), the input term removed by a QR that
+//!    exploits the input structure and runs over blocks of lines (cost linear in the
+//!    lines), optional noise-covariance weighting, one SVD;
+//! 3. [`order`]: the order given or from the largest gap of the singular values;
+//! 4. [`realization`]: `A`, `C` from (12), `B`, `D` from (17), the exact map back to
+//!    continuous time;
+//! 5. [`currency`]: exact continuous poles (`s = ln(z)/Ts` or the inverse bilinear map),
+//!    rigid-body integrators recognised at `z = 1` / `s = 0`, unstable poles reflected,
+//!    residues and feedthrough by linear least squares with the currency's own response;
+//! 6. [`SubspaceInit`]: all of it behind `frf_data::Estimator` (`Start = ()`).
+
+pub mod currency;
+pub mod error;
+pub mod estimator;
+pub mod order;
+pub mod prepare;
+pub mod projection;
+pub mod realization;
+
+pub use error::SubspaceError;
+pub use estimator::{Conditioning, Identified, SubspaceConfig, SubspaceInit, SubspaceReport};

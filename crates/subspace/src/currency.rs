@@ -1,0 +1,303 @@
+//! The identified poles in the model currency ([`realize::FrfModel`]).
+//!
+//! The eigenvalues of the identified `A` are mapped exactly to continuous poles
+//! (`s = ln(z)/Ts` through the hold, `s = (2/T)(xi - 1)/(xi + 1)` for the bilinear
+//! variable). Poles within a fraction of the lowest line of the origin are the
+//! rigid-body integrators (`z = 1`, `s = 0`; a double integrator is a defective pair
+//! that noise splits, so the cluster is recognised by its distance, not by exact
+//! equality). Unstable poles are reflected into the left half-plane (`s -> -conj(s)`,
+//! `z -> 1/conj(z)`) and reported.
+//!
+//! The residue matrices, the rigid-body coefficients and the feedthrough are then fitted
+//! by linear least squares on the data, with the weights of the chain's criterion and
+//! the currency's own response (every known factor and the exact hold included), entry
+//! by entry: for a zero-order-hold plant and exact poles this reproduces the data
+//! exactly, and it is the best fit of the currency for those poles. The residues are
+//! full matrices (their numerical rank is what the data give).
+
+use crate::prepare::Variable;
+use crate::realization::condition;
+use crate::SubspaceError;
+use faer::linalg::solvers::SolveLstsq;
+use faer::Mat;
+use realize::{FrfModel, KnownFactors, ModalModel, PolePair, RealPole, C64};
+use serde::{Deserialize, Serialize};
+
+/// A pole that was moved into the stable region.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ReflectedPole {
+    /// The identified pole, real part (rad/s).
+    pub re: f64,
+    /// The identified pole, imaginary part (rad/s).
+    pub im: f64,
+    /// Its frequency `|s| / 2 pi`, Hz.
+    pub f_hz: f64,
+}
+
+/// The poles of the currency.
+#[derive(Debug, Clone, Default)]
+pub struct PoleSet {
+    /// Upper poles of the complex pairs, rad/s.
+    pub pairs: Vec<C64>,
+    /// Real poles (not at the origin), rad/s.
+    pub reals: Vec<f64>,
+    /// Eigenvalues recognised as integrators.
+    pub at_origin: usize,
+    /// Integrators of the rigid-body part.
+    pub integrators: usize,
+    /// Poles reflected into the left half-plane.
+    pub reflected: Vec<ReflectedPole>,
+    /// Notes (eigenvalues that have no continuous image).
+    pub notes: Vec<String>,
+}
+
+/// Classifies the eigenvalues `eig` of the identified `A` (see the module
+/// documentation). `omega_min` is the lowest line (rad/s); poles with
+/// `|s| < rigid_fraction * omega_min` are integrators, at most `max_integrators` of
+/// them in the rigid-body part. Poles within `merge_tol` (relative) of each other are
+/// one pole with a residue of higher rank (a minimal state space repeats a pole once
+/// per rank of its residue).
+pub fn classify(
+    eig: &[C64],
+    variable: Variable,
+    omega_min: f64,
+    rigid_fraction: f64,
+    max_integrators: usize,
+    merge_tol: f64,
+) -> PoleSet {
+    let mut ps = PoleSet::default();
+    for &l in eig {
+        let is_real_eig = l.im.abs() <= 1e-12 * l.norm();
+        if let Variable::Shift { ts } = variable {
+            if l.norm() == 0.0 || (is_real_eig && l.re < 0.0) {
+                ps.notes.push(format!(
+                    "eigenvalue z = {:.4e} has no continuous image through the hold (a real pole at z <= 0, {:.1} Hz): left out",
+                    l.re,
+                    0.5 / ts
+                ));
+                continue;
+            }
+        }
+        let mut s = variable.to_s(if is_real_eig { C64::new(l.re, 0.0) } else { l });
+        if !(s.re.is_finite() && s.im.is_finite()) {
+            ps.notes
+                .push(format!("eigenvalue {l} maps to an infinite pole: left out"));
+            continue;
+        }
+        if s.norm() < rigid_fraction * omega_min {
+            ps.at_origin += 1;
+            continue;
+        }
+        if s.im < 0.0 && !is_real_eig {
+            continue; // the conjugate of an upper pole
+        }
+        if s.re > 0.0 {
+            ps.reflected.push(ReflectedPole {
+                re: s.re,
+                im: s.im,
+                f_hz: s.norm() / std::f64::consts::TAU,
+            });
+            s.re = -s.re;
+        }
+        if is_real_eig {
+            ps.reals.push(s.re);
+        } else {
+            ps.pairs.push(s);
+        }
+    }
+    ps.integrators = ps.at_origin.min(max_integrators);
+    ps.pairs.sort_by(|a, b| a.norm().total_cmp(&b.norm()));
+    ps.reals.sort_by(|a, b| b.total_cmp(a));
+    let (pairs, merged_p) = merge(&ps.pairs, merge_tol, |z| z);
+    let reals_c: Vec<C64> = ps.reals.iter().map(|&x| C64::new(x, 0.0)).collect();
+    let (reals, merged_r) = merge(&reals_c, merge_tol, |z| z);
+    if merged_p + merged_r > 0 {
+        ps.notes.push(format!(
+            "{} repeated poles (a residue of rank > 1, or a pole split by noise; within {merge_tol:.0e} relative) merged: one residue matrix each",
+            merged_p + merged_r
+        ));
+    }
+    ps.pairs = pairs;
+    ps.reals = reals.into_iter().map(|z| z.re).collect();
+    ps
+}
+
+/// Merges poles (sorted by modulus) closer than `tol` relative into their mean;
+/// returns the poles and how many were merged away.
+fn merge(poles: &[C64], tol: f64, f: impl Fn(C64) -> C64) -> (Vec<C64>, usize) {
+    let mut out: Vec<(C64, usize)> = Vec::new();
+    let mut merged = 0;
+    for &p in poles {
+        let p = f(p);
+        if let Some(last) = out
+            .iter_mut()
+            .find(|(q, c)| ((*q / *c as f64) - p).norm() <= tol * p.norm())
+        {
+            last.0 += p;
+            last.1 += 1;
+            merged += 1;
+        } else {
+            out.push((p, 1));
+        }
+    }
+    (out.into_iter().map(|(s, c)| s / c as f64).collect(), merged)
+}
+
+/// One basis term of the currency: which coefficient it multiplies.
+#[derive(Debug, Clone, Copy)]
+enum Term {
+    PairRe(usize),
+    PairIm(usize),
+    Real(usize),
+    Rigid(usize),
+    Feedthrough,
+}
+
+fn unit_model(ps: &PoleSet, term: Term) -> ModalModel {
+    let one = |z: C64| Mat::from_fn(1, 1, |_, _| z);
+    let mut m = ModalModel::new(1, 1);
+    match term {
+        Term::PairRe(q) => m.pairs.push(PolePair {
+            pole: ps.pairs[q],
+            residue: one(C64::new(1.0, 0.0)),
+        }),
+        Term::PairIm(q) => m.pairs.push(PolePair {
+            pole: ps.pairs[q],
+            residue: one(C64::new(0.0, 1.0)),
+        }),
+        Term::Real(q) => m.real_poles.push(RealPole {
+            pole: ps.reals[q],
+            residue: Mat::from_fn(1, 1, |_, _| 1.0),
+        }),
+        Term::Rigid(k) => {
+            m.rigid = (0..=k)
+                .map(|i| Mat::from_fn(1, 1, |_, _| if i == k { 1.0 } else { 0.0 }))
+                .collect()
+        }
+        Term::Feedthrough => m.feedthrough = Mat::from_fn(1, 1, |_, _| 1.0),
+    }
+    m
+}
+
+/// Fits the residues, rigid-body coefficients and feedthrough of the poles `ps` to the
+/// data `g` (line after line, each `vec(G)`) at `omega` with weights `w` (same layout),
+/// through the currency's response with `factors`. Returns the model and the worst
+/// condition number of the (column-scaled) regressors.
+pub fn fit_residues(
+    ny: usize,
+    nu: usize,
+    omega: &[f64],
+    g: &[C64],
+    w: &[f64],
+    ps: &PoleSet,
+    factors: &KnownFactors,
+) -> Result<(FrfModel, f64), SubspaceError> {
+    let mut terms = Vec::new();
+    for q in 0..ps.pairs.len() {
+        terms.push(Term::PairRe(q));
+        terms.push(Term::PairIm(q));
+    }
+    terms.extend((0..ps.reals.len()).map(Term::Real));
+    terms.extend((0..ps.integrators).map(Term::Rigid));
+    terms.push(Term::Feedthrough);
+    let (nl, nb, m) = (omega.len(), terms.len(), ny * nu);
+    if 2 * nl < nb {
+        return Err(SubspaceError::TooFewLines {
+            lines: nl,
+            band: "the data".into(),
+            block_rows: 0,
+            order: nb,
+            needed: nb.div_ceil(2),
+        });
+    }
+    // basis columns: the currency's own response of each unit term (1 x 1)
+    let mut basis = Vec::with_capacity(nb);
+    for &t in &terms {
+        let fm = FrfModel {
+            modal: unit_model(ps, t),
+            factors: KnownFactors {
+                dynamics: Vec::new(),
+                crosstalk: None,
+                ..factors.clone()
+            },
+        };
+        basis.push(fm.freq_response(omega)?.values);
+    }
+    let mut modal = ModalModel::new(ny, nu);
+    modal.pairs = ps
+        .pairs
+        .iter()
+        .map(|&pole| PolePair {
+            pole,
+            residue: Mat::zeros(ny, nu),
+        })
+        .collect();
+    modal.real_poles = ps
+        .reals
+        .iter()
+        .map(|&pole| RealPole {
+            pole,
+            residue: Mat::zeros(ny, nu),
+        })
+        .collect();
+    modal.rigid = (0..ps.integrators).map(|_| Mat::zeros(ny, nu)).collect();
+    let mut worst = 1.0f64;
+    let mut a = Mat::<f64>::zeros(2 * nl, nb);
+    let mut y = Mat::<f64>::zeros(2 * nl, 1);
+    for e in 0..m {
+        let (i, j) = (e % ny, e / ny);
+        for k in 0..nl {
+            let sw = w[k * m + e].max(0.0).sqrt();
+            for (q, col) in basis.iter().enumerate() {
+                a[(2 * k, q)] = col[k].re * sw;
+                a[(2 * k + 1, q)] = col[k].im * sw;
+            }
+            y[(2 * k, 0)] = g[k * m + e].re * sw;
+            y[(2 * k + 1, 0)] = g[k * m + e].im * sw;
+        }
+        let scale: Vec<f64> = (0..nb)
+            .map(|q| {
+                let s = (0..2 * nl)
+                    .map(|r| a[(r, q)] * a[(r, q)])
+                    .sum::<f64>()
+                    .sqrt();
+                if s > 0.0 {
+                    s
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        for q in 0..nb {
+            for r in 0..2 * nl {
+                a[(r, q)] /= scale[q];
+            }
+        }
+        let qr = a.qr();
+        worst = worst.max(condition(&qr.thin_R().to_owned()));
+        let x = qr.solve_lstsq(&y);
+        let mut re_part = vec![0.0; ps.pairs.len()];
+        for (q, t) in terms.iter().enumerate() {
+            let v = x[(q, 0)] / scale[q];
+            if !v.is_finite() {
+                return Err(SubspaceError::numerical(
+                    "least squares of the residues",
+                    format!("non-finite coefficient for entry ({}, {})", i + 1, j + 1),
+                ));
+            }
+            match *t {
+                Term::PairRe(p) => re_part[p] = v,
+                Term::PairIm(p) => modal.pairs[p].residue[(i, j)] = C64::new(re_part[p], v),
+                Term::Real(p) => modal.real_poles[p].residue[(i, j)] = v,
+                Term::Rigid(kk) => modal.rigid[kk][(i, j)] = v,
+                Term::Feedthrough => modal.feedthrough[(i, j)] = v,
+            }
+        }
+    }
+    let model = FrfModel {
+        modal,
+        factors: factors.clone(),
+    };
+    model.validate()?;
+    Ok((model, worst))
+}

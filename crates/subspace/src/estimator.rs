@@ -1,0 +1,497 @@
+//! [`SubspaceInit`]: the frequency-domain subspace fit as an initialiser of the
+//! estimator chain (`--init subspace`).
+
+use crate::currency::{classify, fit_residues, ReflectedPole};
+use crate::order::{largest_gap, numerical_rank, RANK_TOL};
+use crate::prepare::{prepare, Variable};
+use crate::projection::project;
+use crate::realization::{bilinear_to_continuous, fit_b_d, shift_a_c};
+use crate::SubspaceError;
+use faer::Mat;
+use frf_data::chain::weighted_cost;
+use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
+use frf_data::{Convergence, DelayChoice, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
+use realize::{FrfModel, Hold, KnownFactors, StateSpace, TimeDomain, C64};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Settings of [`SubspaceInit`], with documented defaults.
+#[derive(Debug, Clone)]
+pub struct SubspaceConfig {
+    /// The hold of the sampled measurement. [`Hold::Zoh`] fits in `z = exp(j w Ts)`
+    /// (exact); anything else fits a continuous model through the bilinear map. Default:
+    /// [`Hold::None`].
+    pub hold: Hold,
+    /// Delay handling: `Fixed` divides the delay out, `Auto` estimates it first (delay
+    /// periodogram of `frf_data::delay`, the hold's half sample taken out) and marks it
+    /// as a free parameter for a refiner, `Start` divides out the start value and marks
+    /// it free, `None` leaves the data as they are. Default: [`DelayChoice::Auto`].
+    pub delay: DelayChoice,
+    /// Delay estimator settings. Default: [`DelayConfig::default`].
+    pub delay_config: DelayConfig,
+    /// `k` of `(j w)^k`: 0 displacement (default), 1 velocity, 2 accelerance data.
+    pub derivative_order: u32,
+    /// Weighting: [`Weighting::Uniform`] runs the unweighted algorithm; any other
+    /// weighting runs the noise-covariance weighted variant with the inverse weights as
+    /// the variance, and weights (17) and the residue fit. Default: [`Weighting::Auto`]
+    /// (the data's variance when they carry one, eq. (27) of the wafer-stage paper
+    /// otherwise).
+    pub weighting: Weighting,
+    /// Model order (number of states); `None` chooses it from the singular values
+    /// (largest log gap, see [`crate::order`]). Default: `None`.
+    pub order: Option<usize>,
+    /// Largest order considered when it is chosen from the data. Default: 60.
+    pub max_order: usize,
+    /// Block rows `r` of the data equation (6); `None`: `2 ceil(n_max / p) + 1` with
+    /// `n_max` the given order or `max_order` (about twice what (12) needs: more rows
+    /// average the noise better; on the reference wafer stage the median error falls
+    /// from 8e-4 at 16 rows to 3.6e-5 at 31 and 2.1e-5 at 60, at a cost growing as
+    /// `r^2`). Default: `None`.
+    pub block_rows: Option<usize>,
+    /// Poles with `|s|` below this fraction of the lowest line are rigid-body
+    /// integrators: the data do not resolve poles below the band, and noise splits a
+    /// double integrator (a defective pair at `z = 1`) by about the square root of the
+    /// noise level (to 0.67 of the lowest line on the reference wafer stage, whose
+    /// relative noise is ~1e-3). Default: 0.75.
+    pub rigid_fraction: f64,
+    /// Poles closer than this (relative) are one pole whose residue has rank > 1 (a
+    /// minimal state space repeats such a pole once per rank). Default: 1e-3.
+    pub merge_tol: f64,
+    /// With the data's own variance as the weighting (the noise part of the weighted
+    /// singular values is then about 1), the order is the number of singular values
+    /// above this level; otherwise (and when none is above it) the largest gap decides.
+    /// Default: 4.
+    pub noise_threshold: f64,
+    /// Most integrators of the rigid-body part (`1/s`, `1/s^2`, ...). Default: 2.
+    pub max_integrators: usize,
+    /// Progress callback.
+    pub progress: ProgressSink,
+}
+
+impl Default for SubspaceConfig {
+    fn default() -> Self {
+        Self {
+            hold: Hold::None,
+            delay: DelayChoice::Auto,
+            delay_config: DelayConfig::default(),
+            derivative_order: 0,
+            weighting: Weighting::Auto,
+            order: None,
+            max_order: 60,
+            block_rows: None,
+            rigid_fraction: 0.75,
+            max_integrators: 2,
+            noise_threshold: 4.0,
+            merge_tol: 1e-3,
+            progress: ProgressSink::none(),
+        }
+    }
+}
+
+/// Condition numbers of the linear problems of the fit.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Conditioning {
+    /// Of `O_r` without its last block row (the shift equations (12)).
+    pub shift: f64,
+    /// Worst over the inputs of the column-scaled regressor of (17).
+    pub b_d: f64,
+    /// Worst over the entries of the column-scaled regressor of the residue fit.
+    pub residues: f64,
+}
+
+/// What [`SubspaceInit`] found.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct SubspaceReport {
+    /// The variable of the fit (discrete through the hold, or bilinear).
+    pub domain: String,
+    /// The weighting.
+    pub weighting: String,
+    /// Whether the noise-covariance weighted variant ran.
+    pub noise_weighted: bool,
+    /// Block rows `r`.
+    pub block_rows: usize,
+    /// Singular values of the (weighted) projected data, descending. With the data's
+    /// true variance as weighting the noise part is about 1.
+    pub singular_values: Vec<f64>,
+    /// Numerical rank of the projected data.
+    pub rank: usize,
+    /// The order (states) of the state space.
+    pub order: usize,
+    /// How it was chosen: `given` or `largest gap` (with the gap as a ratio).
+    pub order_rule: String,
+    /// Condition numbers.
+    pub conditioning: Conditioning,
+    /// Poles reflected into the stable region.
+    pub reflected_poles: Vec<ReflectedPole>,
+    /// Eigenvalues recognised as rigid-body integrators, and integrators kept.
+    pub at_origin: usize,
+    /// Integrators of the rigid-body part of the currency.
+    pub integrators: usize,
+    /// Pole pairs and real poles of the currency.
+    pub pairs: usize,
+    /// Real poles of the currency.
+    pub real_poles: usize,
+    /// The delay estimate, when the delay was estimated.
+    pub delay_estimate: Option<DelayEstimate>,
+    /// The delay divided out, seconds (beyond the hold).
+    pub delay_s: f64,
+    /// Weighted cost of the state space of (17) on the data.
+    pub state_space_cost: f64,
+    /// Weighted cost of the currency model (residues refitted) on the data.
+    pub cost: f64,
+    /// Band, Hz.
+    pub band_hz: (f64, f64),
+}
+
+/// The identified state space and everything the fit found, for callers below the
+/// chain ([`SubspaceInit::identify`]).
+#[derive(Debug, Clone)]
+pub struct Identified {
+    /// The state space: discrete in `z` (sample time of the hold) for [`Hold::Zoh`],
+    /// continuous (mapped back exactly from the bilinear variable) otherwise. It
+    /// describes the data with the known factors divided out.
+    pub state_space: StateSpace,
+    /// The model in the currency.
+    pub model: FrfModel,
+    /// The report.
+    pub report: SubspaceReport,
+    /// Notes.
+    pub messages: Vec<String>,
+    /// Stage timings (stage, seconds).
+    pub timings: Vec<(String, f64)>,
+}
+
+/// The frequency-domain subspace initialiser (McKelvey, Akcay and Ljung 1996;
+/// Pintelon & Schoukens, eq. (3)-(17)).
+#[derive(Debug, Clone, Default)]
+pub struct SubspaceInit {
+    /// Settings.
+    pub config: SubspaceConfig,
+}
+
+impl SubspaceInit {
+    /// An initialiser with the given settings.
+    pub fn new(config: SubspaceConfig) -> Self {
+        Self { config }
+    }
+
+    fn check(&self) -> Result<(), SubspaceError> {
+        let c = &self.config;
+        if !(c.rigid_fraction.is_finite() && (0.0..1.0).contains(&c.rigid_fraction)) {
+            return Err(SubspaceError::invalid(
+                "rigid_fraction",
+                c.rigid_fraction,
+                "must be in [0, 1)",
+            ));
+        }
+        if c.order == Some(0) {
+            return Err(SubspaceError::invalid("order", 0, "must be >= 1 state"));
+        }
+        if !(c.merge_tol.is_finite() && (0.0..0.1).contains(&c.merge_tol)) {
+            return Err(SubspaceError::invalid(
+                "merge_tol",
+                c.merge_tol,
+                "must be in [0, 0.1)",
+            ));
+        }
+        if !(c.noise_threshold.is_finite() && c.noise_threshold > 0.0) {
+            return Err(SubspaceError::invalid(
+                "noise_threshold",
+                c.noise_threshold,
+                "must be finite and > 0",
+            ));
+        }
+        if c.order.is_none() && c.max_order == 0 {
+            return Err(SubspaceError::invalid("max_order", 0, "must be >= 1"));
+        }
+        if matches!(c.hold, Hold::Zoh { .. }) && c.derivative_order != 0 {
+            return Err(SubspaceError::invalid(
+                "derivative order",
+                c.derivative_order,
+                "the exact zero-order hold model is for displacement-type data",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Runs the whole fit on `data`: the state space, the currency model and the report.
+    pub fn identify<D: FrfDataset + ?Sized>(&self, data: &D) -> Result<Identified, SubspaceError> {
+        self.check()?;
+        let cfg = &self.config;
+        let t0 = Instant::now();
+        let mut timings = Vec::new();
+        let mut messages = Vec::new();
+        let (ny, nu, nl) = (data.ny(), data.nu(), data.n_lines());
+        let band = if nl > 0 {
+            (data.freq_hz(0), data.freq_hz(nl - 1))
+        } else {
+            (f64::NAN, f64::NAN)
+        };
+        let band_txt = format!("{:.4}..{:.4} Hz", band.0, band.1);
+        if nl < 2 {
+            return Err(SubspaceError::TooFewLines {
+                lines: nl,
+                band: band_txt,
+                block_rows: 0,
+                order: cfg.order.unwrap_or(cfg.max_order),
+                needed: 2,
+            });
+        }
+        // 1. the known factor
+        cfg.progress
+            .step("subspace", 1, Some(4), None, "known factor");
+        let hold_share = match cfg.hold {
+            Hold::Zoh { fs_hz } => 0.5 / fs_hz,
+            _ => 0.0,
+        };
+        let mut delay_estimate = None;
+        let (delay_s, fitted) = match cfg.delay {
+            DelayChoice::None => (0.0, false),
+            DelayChoice::Fixed { seconds } => (seconds, false),
+            DelayChoice::Start { seconds } => (seconds, true),
+            DelayChoice::Auto => {
+                let t = Instant::now();
+                let est = estimate_delay(data, &cfg.delay_config)?;
+                timings.push(("delay".to_string(), t.elapsed().as_secs_f64()));
+                let tau = est.tau_s - hold_share;
+                messages.push(format!(
+                    "delay estimate {:.2} us (coherence {:.2}), {:.2} us divided out beyond the hold; a refiner refines it",
+                    est.tau_s * 1e6,
+                    est.coherence,
+                    tau * 1e6
+                ));
+                delay_estimate = Some(est);
+                (tau, true)
+            }
+        };
+        if !delay_s.is_finite() {
+            return Err(SubspaceError::invalid(
+                "delay (s)",
+                delay_s,
+                "must be finite",
+            ));
+        }
+        let factors = KnownFactors {
+            delay_s,
+            delay_fitted: fitted,
+            derivative_order: cfg.derivative_order,
+            hold: cfg.hold,
+            dynamics: Vec::new(),
+            crosstalk: None,
+        };
+        let prepared = prepare(data, &factors, &cfg.weighting)?;
+        let weighting = cfg.weighting.resolve(data);
+
+        // 2. the projection and the order
+        let n_upper = cfg.order.unwrap_or(cfg.max_order);
+        let r = match cfg.block_rows {
+            Some(r) => {
+                if r < 2 || (r - 1) * ny < n_upper {
+                    return Err(SubspaceError::invalid(
+                        "block rows",
+                        r,
+                        format!(
+                            "the shift equations (12) need (r - 1) p >= n: at least {} for order {n_upper} with {ny} outputs",
+                            n_upper.div_ceil(ny) + 1
+                        ),
+                    ));
+                }
+                r
+            }
+            None => 2 * n_upper.div_ceil(ny) + 1,
+        };
+        let needed = (r + 1).max((n_upper + 4).div_ceil(2));
+        if nl < needed {
+            return Err(SubspaceError::TooFewLines {
+                lines: nl,
+                band: band_txt,
+                block_rows: r,
+                order: n_upper,
+                needed,
+            });
+        }
+        cfg.progress
+            .step("subspace", 2, Some(4), None, "QR of the data matrix");
+        let t = Instant::now();
+        let proj = project(&prepared, r)?;
+        timings.push(("qr+svd".to_string(), t.elapsed().as_secs_f64()));
+        let sv = proj.singular_values.clone();
+        let rank = numerical_rank(&sv);
+        if rank == 0 {
+            return Err(SubspaceError::invalid(
+                "data",
+                "all zero",
+                "the projected data matrix is zero: nothing to identify",
+            ));
+        }
+        let (n, order_rule) = match cfg.order {
+            Some(n) => {
+                if n > rank {
+                    return Err(SubspaceError::OrderExceedsRank {
+                        order: n,
+                        rank,
+                        tol: RANK_TOL,
+                    });
+                }
+                (n, "given".to_string())
+            }
+            None => {
+                let n_max = ((r - 1) * ny).min(rank).min(cfg.max_order);
+                let above = sv[..n_max]
+                    .iter()
+                    .filter(|&&s| s > cfg.noise_threshold)
+                    .count();
+                if matches!(weighting, Weighting::InverseVariance) && above > 0 {
+                    (
+                        above,
+                        format!(
+                            "singular values above {} times the noise level (inverse-variance weighting): s_{above} = {:.3e}, s_{} = {:.3e}",
+                            cfg.noise_threshold,
+                            sv[above - 1],
+                            above + 1,
+                            sv[above]
+                        ),
+                    )
+                } else {
+                    let (n, gap) = largest_gap(&sv, n_max);
+                    (
+                        n,
+                        format!(
+                            "largest gap of the singular values in 1..={n_max}: s_{n}/s_{} = {:.3e}",
+                            n + 1,
+                            gap.exp()
+                        ),
+                    )
+                }
+            }
+        };
+
+        // 3. A, C from the shift structure, B, D from (17)
+        cfg.progress
+            .step("subspace", 3, Some(4), None, "state space");
+        let t = Instant::now();
+        let o = proj.observability(n);
+        let (a, c, cond_shift) = shift_a_c(&o, ny)?;
+        timings.push(("A, C (12)".to_string(), t.elapsed().as_secs_f64()));
+        let t = Instant::now();
+        let (b, d, cond_bd, ss_cost) = fit_b_d(&prepared, &a, &c)?;
+        let state_space = match prepared.variable {
+            Variable::Shift { ts } => {
+                StateSpace::new(a.clone(), b, c, d, TimeDomain::Discrete { ts })?
+            }
+            Variable::Bilinear { t } => bilinear_to_continuous(&a, &b, &c, &d, t)?,
+        };
+        timings.push(("B, D (17)".to_string(), t.elapsed().as_secs_f64()));
+
+        // 4. the currency: exact poles, residues by least squares
+        cfg.progress
+            .step("subspace", 4, Some(4), None, "poles and residues");
+        let t = Instant::now();
+        let eig = eigenvalues(&a)?;
+        let ps = classify(
+            &eig,
+            prepared.variable,
+            prepared.omega[0],
+            cfg.rigid_fraction,
+            cfg.max_integrators,
+            cfg.merge_tol,
+        );
+        messages.extend(ps.notes.iter().cloned());
+        for rp in &ps.reflected {
+            messages.push(format!(
+                "unstable pole {:.4e} {:+.4e}j rad/s ({:.2} Hz) reflected into the left half-plane",
+                rp.re, rp.im, rp.f_hz
+            ));
+        }
+        if ps.at_origin > ps.integrators {
+            messages.push(format!(
+                "{} eigenvalues at the origin: a rigid-body part with {} integrators (coefficients of 1/s^k fitted as full matrices)",
+                ps.at_origin, ps.integrators
+            ));
+        }
+        let g = data.values_vec();
+        let (model, cond_res) =
+            fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)?;
+        timings.push(("residues".to_string(), t.elapsed().as_secs_f64()));
+        let cost = weighted_cost(&model, data, &weighting)?;
+        timings.push(("total".to_string(), t0.elapsed().as_secs_f64()));
+        messages.push(format!(
+            "order {n} ({order_rule}); {} pole pairs, {} real poles, {} integrators; weighting: {}",
+            ps.pairs.len(),
+            ps.reals.len(),
+            ps.integrators,
+            weighting.name()
+        ));
+        let report = SubspaceReport {
+            domain: prepared.variable.describe(),
+            weighting: weighting.name().to_string(),
+            noise_weighted: !prepared.uniform,
+            block_rows: r,
+            singular_values: sv,
+            rank,
+            order: n,
+            order_rule,
+            conditioning: Conditioning {
+                shift: cond_shift,
+                b_d: cond_bd,
+                residues: cond_res,
+            },
+            reflected_poles: ps.reflected.clone(),
+            at_origin: ps.at_origin,
+            integrators: ps.integrators,
+            pairs: ps.pairs.len(),
+            real_poles: ps.reals.len(),
+            delay_estimate,
+            delay_s,
+            state_space_cost: ss_cost,
+            cost,
+            band_hz: band,
+        };
+        Ok(Identified {
+            state_space,
+            model,
+            report,
+            messages,
+            timings,
+        })
+    }
+}
+
+/// Eigenvalues of a real square matrix.
+fn eigenvalues(a: &Mat<f64>) -> Result<Vec<C64>, SubspaceError> {
+    let ev = a
+        .eigenvalues()
+        .map_err(|e| SubspaceError::numerical("eigenvalues of A", format!("{e:?}")))?;
+    let v: Vec<C64> = ev.iter().map(|z| C64::new(z.re, z.im)).collect();
+    if v.iter().any(|z| !(z.re.is_finite() && z.im.is_finite())) {
+        return Err(SubspaceError::numerical(
+            "eigenvalues of A",
+            "non-finite eigenvalues",
+        ));
+    }
+    Ok(v)
+}
+
+impl Estimator for SubspaceInit {
+    type Model = FrfModel;
+    type Start = ();
+    type Report = SubspaceReport;
+    type Error = SubspaceError;
+
+    fn estimate<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        _start: (),
+    ) -> Result<Fit<FrfModel, SubspaceReport>, SubspaceError> {
+        let id = self.identify(data)?;
+        let mut fit = Fit::from_model(id.model, "frequency-domain subspace (McKelvey)")
+            .with_report(id.report);
+        fit.cost_history = vec![fit.report.cost];
+        fit.convergence = Convergence::Direct;
+        fit.messages = id.messages;
+        for (stage, s) in id.timings {
+            fit.timings.push(frf_data::Timing { stage, seconds: s });
+        }
+        Ok(fit)
+    }
+}
