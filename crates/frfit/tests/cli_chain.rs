@@ -15,8 +15,16 @@ fn unknown_methods_name_the_choices() {
     let csv = write_plant(&dir, 0.0);
     let model = dir.join("m.json");
     for (opt, name, says) in [
-        ("--init", "bogus", "unknown method; available: cmif, subspace, sk"),
-        ("--init", "cmif,bogus", "unknown method `bogus`; available: cmif, subspace, sk"),
+        (
+            "--init",
+            "bogus",
+            "unknown method `bogus`; available: cmif, subspace, sk",
+        ),
+        (
+            "--init",
+            "cmif,bogus",
+            "unknown method `bogus`; available: cmif, subspace, sk",
+        ),
         ("--refine", "bogus", "available: riv, none, ml"),
     ] {
         let o = run(&[
@@ -153,5 +161,52 @@ fn refine_ml_reports_the_uncertainty_of_the_modes() {
     assert!(
         md.contains("+- 2 sigma"),
         "the fit table shows the intervals"
+    );
+}
+
+/// `--init cmif,subspace`: both chains run, the one with the smallest final prediction
+/// error is kept, and every run is in summary.json's `chain_runs`.
+#[test]
+fn several_initialisers_keep_the_smallest_final_prediction_error() {
+    let dir = temp_dir("chain-several");
+    let csv = write_plant(&dir, 0.0);
+    let model = dir.join("m.json");
+    let report = dir.join("report");
+    let o = run(&[
+        "fit",
+        csv.to_str().unwrap(),
+        "--delay",
+        "none",
+        "--init",
+        "cmif,subspace",
+        "--refine",
+        "riv",
+        "--out",
+        model.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary = read_json(&report.join("summary.json"));
+    let runs = summary["chain_runs"].as_array().expect("chain_runs");
+    assert_eq!(runs.len(), 2, "{runs:?}");
+    assert_eq!(runs[0]["chain"], serde_json::json!(["cmif", "riv"]));
+    assert_eq!(runs[1]["chain"], serde_json::json!(["subspace", "riv"]));
+    let kept: Vec<&serde_json::Value> = runs.iter().filter(|r| r["kept"] == true).collect();
+    assert_eq!(kept.len(), 1, "{runs:?}");
+    let fpe = |r: &serde_json::Value| r["fpe"].as_f64().unwrap();
+    assert!(runs.iter().all(|r| fpe(kept[0]) <= fpe(r)), "{runs:?}");
+    assert_eq!(summary["chain"], kept[0]["chain"]);
+    let m = read_json(&model);
+    assert_eq!(m["provenance"]["chain"], kept[0]["chain"]);
+    assert!(
+        m["provenance"]["notes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n.as_str().unwrap().contains("initialisers tried")),
+        "{}",
+        m["provenance"]["notes"]
     );
 }
