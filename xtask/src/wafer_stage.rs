@@ -6,7 +6,11 @@
 //! 3. fit and diagnose it with the frfit pipeline (the user declares the zero-order hold);
 //! 4. write `model.json`, `report.md`, the SVG figures and `summary.json`;
 //! 5. validate the model against the simulator's noiseless response and true modes,
-//!    write `validation.md`.
+//!    write `validation.md`;
+//! 6. simulate a second experiment of the same plant (new multisine phases and noise)
+//!    and validate the model on it as a user would (Oomen-Bosgra, minimum additive
+//!    uncertainty per line): `validation-experiment/` (its FRF, `validation.json`,
+//!    `gamma.svg`, `report.md`), summarised in `validation.md` and `report.md`.
 
 use crate::validate::{self, Validation};
 use crate::{Context, Error};
@@ -15,10 +19,13 @@ use experiment::synth::{
     ControllerConfig, ExperimentConfig, WaferStageConfig, WaferStageExperiment,
 };
 use frf_data::truth::Truth;
+use frf_data::ModelStructure;
 use frf_data::{FrfDataset, ProgressSink};
 use frfit::additive_riv::{Hold, ModelFile};
 use frfit::pipeline::{self, PipelineConfig, PipelineOutput};
 use frfit::report::write_report;
+use frfit::validation::{validate_frf, FrfValidationConfig};
+use frfit::validation_report::{verdict_text, write_validation_dir};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -26,6 +33,9 @@ use std::time::Instant;
 /// The FRF file in the output directory; the report and the model name it relative to
 /// the directory, so that the directory can be moved as a whole.
 const DATA_NAME: &str = "frf.csv";
+
+/// Added to `--seed` for the phases and noise of the second (validation) experiment.
+const VALIDATION_SEED_OFFSET: u64 = 1_000_003;
 
 /// Options of `cargo xtask wafer-stage`.
 #[derive(ClapArgs, Debug)]
@@ -161,7 +171,7 @@ pub fn run(args: Args) -> Result<(), Error> {
     let periods = usize::try_from(args.periods).stage("--periods")?;
     let realizations = usize::try_from(args.realizations).stage("--realizations")?;
     let mut stages = Stages {
-        total: 5,
+        total: 6,
         done: Vec::new(),
     };
     let mut written: Vec<PathBuf> = Vec::new();
@@ -273,9 +283,88 @@ pub fn run(args: Args) -> Result<(), Error> {
             Ok(v)
         },
     )?;
+
+    // 6. a second experiment of the same plant, and the model validated on it
+    let vdir = dir.join("validation-experiment");
+    let vseed = args.seed.wrapping_add(VALIDATION_SEED_OFFSET);
+    let gamma = stages.run(
+        "validate (2nd)",
+        &format!("second experiment of the same plant (phases and noise seed {vseed}), minimum additive uncertainty per line"),
+        || {
+            let mut exp = ExperimentConfig::wafer_stage(vseed);
+            exp.periods = periods;
+            exp.realizations = realizations;
+            let sim2 = WaferStageExperiment::new(&stage_cfg, &ControllerConfig::default(), exp)
+                .stage("validation experiment")?;
+            let est2 = sim2.run().stage("validation experiment")?;
+            let (lo, hi) = (out.band.freq_hz(0), out.band.freq_hz(out.band.n_lines() - 1));
+            let vdata = est2
+                .frf
+                .band(lo, hi)
+                .stage("validation experiment band")?
+                .to_frf();
+            std::fs::create_dir_all(&vdir).stage("validation-experiment directory")?;
+            frf_data::io::write_frf_csv(
+                vdir.join(DATA_NAME),
+                &vdata,
+                &[format!(
+                    "second simulated experiment of the wafer stage seed {}, phases and noise seed {vseed}",
+                    args.seed
+                )],
+            )
+            .stage("validation-experiment/frf.csv")?;
+            let model = ModelFile::read(dir.join("model.json"))
+                .stage("model.json")?
+                .to_model()
+                .stage("model.json")?;
+            let grid = model.response_at(&vdata.omegas());
+            let v = validate_frf(&grid, &vdata, None, &FrfValidationConfig::default())
+                .stage("validation")?;
+            write_validation_dir(
+                &vdir,
+                "../model.json",
+                &format!("{} modes, the diagnosed model", model.modes().len()),
+                DATA_NAME,
+                &v,
+                vdata.units.as_deref(),
+            )
+            .stage("validation-experiment")?;
+            let section = format!(
+                "\n## Validation on a second experiment\n\n\
+                 A second simulated experiment of the same plant (phases and noise seed \
+                 {vseed}, {periods} periods x {realizations} realizations), the model \
+                 validated on it (Oomen-Bosgra, minimum additive uncertainty per line, alpha \
+                 = {}): **{}**; gamma max {:.4e}, median {:.4e}; {} of {} lines the \
+                 disturbance alone does not explain (joint level). Details: \
+                 [validation-experiment/report.md](validation-experiment/report.md).\n\n\
+                 ![gamma against frequency](validation-experiment/gamma.svg)\n",
+                v.alpha,
+                verdict_text(v.verdict),
+                v.gamma_max,
+                v.gamma_median,
+                v.lines_invalidated_at_zero,
+                v.lines.len()
+            );
+            for name in ["validation.md", "report.md"] {
+                let path = dir.join(name);
+                let mut text = std::fs::read_to_string(&path).stage(name)?;
+                text.push_str(&section);
+                write_text(&path, &text)?;
+            }
+            Ok(v)
+        },
+    )?;
     written.push(validation_path);
+    written.push(vdir);
 
     println!("{}", validation.console_table());
+    println!(
+        "validation on a second experiment: {}, gamma max {:.3e}, median {:.3e} over {} lines",
+        verdict_text(gamma.verdict),
+        gamma.gamma_max,
+        gamma.gamma_median,
+        gamma.lines.len()
+    );
     println!(
         "verdict of the diagnosis: {} ({} step(s) tested, {} accepted)",
         out.summary.verdict,

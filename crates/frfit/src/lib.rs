@@ -14,6 +14,7 @@ pub mod pipeline;
 pub mod plots;
 pub mod report;
 pub mod summary;
+pub mod validation_report;
 
 pub use error::FrfitError;
 

@@ -12,11 +12,11 @@ use super::common::load_data;
 use clap::{Args as ClapArgs, ValueEnum};
 use frf_data::{FrfDataset, ModelStructure};
 use frfit::additive_riv::ModelFile;
-use frfit::plots::{Axis, LinePlot, Series};
 use frfit::realize::ResponseGrid;
-use frfit::validation::{validate_frf, FrfValidation, FrfValidationConfig, GammaMethod, Verdict};
+use frfit::validation::{validate_frf, FrfValidation, FrfValidationConfig, GammaMethod};
+pub use frfit::validation_report::verdict_text;
+use frfit::validation_report::write_validation_dir;
 use frfit::FrfitError;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -119,18 +119,14 @@ pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitErr
         what: "validation".into(),
         why: e.to_string(),
     })?;
-    std::fs::create_dir_all(&args.out).map_err(|e| FrfitError::io(&args.out, e))?;
-    let json_path = args.out.join("validation.json");
-    let json = serde_json::to_string_pretty(&v).map_err(|e| FrfitError::Io {
-        path: json_path.display().to_string(),
-        message: e.to_string(),
-    })?;
-    std::fs::write(&json_path, json).map_err(|e| FrfitError::io(&json_path, e))?;
-    let svg_path = args.out.join("gamma.svg");
-    gamma_plot(&v).write_svg(&svg_path, (900, 500))?;
-    let md_path = args.out.join("report.md");
-    let md = report(args, &desc, &v, data.units.as_deref());
-    std::fs::write(&md_path, md).map_err(|e| FrfitError::io(&md_path, e))?;
+    write_validation_dir(
+        &args.out,
+        &args.model.display().to_string(),
+        &desc,
+        &args.data.display().to_string(),
+        &v,
+        data.units.as_deref(),
+    )?;
     if !quiet {
         println!(
             "{}: gamma max {:.3e}, median {:.3e} over {} lines ({:.2} s)",
@@ -143,86 +139,4 @@ pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitErr
         println!("written to {}", args.out.display());
     }
     Ok(v)
-}
-
-pub fn verdict_text(v: Verdict) -> &'static str {
-    match v {
-        Verdict::NotInvalidated => "not invalidated",
-        Verdict::InvalidatedAtZeroUncertainty => "invalidated at zero uncertainty",
-    }
-}
-
-/// Gamma, the model error and the disturbance bound against frequency.
-fn gamma_plot(v: &FrfValidation) -> LinePlot {
-    let f: Vec<f64> = v.lines.iter().map(|l| l.f_hz).collect();
-    LinePlot::new("Minimum additive uncertainty per line")
-        .with_y(Axis::log("Magnitude"))
-        .with_series(Series::line(
-            "|G - P^| (model error seen by the data)",
-            f.clone(),
-            v.lines.iter().map(|l| l.model_error).collect(),
-        ))
-        .with_series(
-            Series::line(
-                "gamma",
-                f.clone(),
-                v.lines.iter().map(|l| l.gamma).collect(),
-            )
-            .with_width(2),
-        )
-        .with_series(Series::dashed(
-            "disturbance bound",
-            f,
-            v.lines.iter().map(|l| l.disturbance_bound).collect(),
-        ))
-}
-
-/// The Markdown report.
-fn report(args: &Args, desc: &str, v: &FrfValidation, units: Option<&str>) -> String {
-    let u = units.unwrap_or("FRF units");
-    let mut s = String::new();
-    let _ = writeln!(s, "# Model validation\n");
-    let _ = writeln!(s, "- model: `{}` ({desc})", args.model.display());
-    let _ = writeln!(s, "- validation data: `{}`", args.data.display());
-    let _ = writeln!(
-        s,
-        "- alpha = {} per line (for each input column's output vector); verdict at the \
-         joint level over all lines and inputs",
-        v.alpha
-    );
-    let _ = writeln!(s, "- **verdict: {}**", verdict_text(v.verdict));
-    let _ = writeln!(
-        s,
-        "- lines the disturbance alone does not explain (joint level): {} of {}",
-        v.lines_invalidated_at_zero,
-        v.lines.len()
-    );
-    let _ = writeln!(
-        s,
-        "- gamma: max {:.4e}, median {:.4e} ({u})\n",
-        v.gamma_max, v.gamma_median
-    );
-    let _ = writeln!(
-        s,
-        "gamma is the smallest norm sigma_max(Delta_u) of an additive uncertainty \
-         P^ + Delta_u that, with a disturbance inside the bound, reproduces the validation \
-         FRF at the line (Oomen and Bosgra, the FDMVOP). Where gamma stays below the model \
-         error |G - P^|, part of the error is attributed to noise; more periods in the \
-         validation experiment shrink the disturbance bound and gamma approaches the true \
-         model error from below.\n"
-    );
-    let _ = writeln!(s, "![gamma against frequency](gamma.svg)\n");
-    let mut top: Vec<_> = v.lines.iter().collect();
-    top.sort_by(|a, b| b.gamma.total_cmp(&a.gamma));
-    let _ = writeln!(s, "## Lines with the largest gamma\n");
-    let _ = writeln!(s, "| f [Hz] | gamma | model error | disturbance bound |");
-    let _ = writeln!(s, "|---:|---:|---:|---:|");
-    for l in top.iter().take(10) {
-        let _ = writeln!(
-            s,
-            "| {:.3} | {:.3e} | {:.3e} | {:.3e} |",
-            l.f_hz, l.gamma, l.model_error, l.disturbance_bound
-        );
-    }
-    s
 }
