@@ -308,7 +308,7 @@ pub fn run(args: Args) -> Result<(), Error> {
                 vdir.join(DATA_NAME),
                 &vdata,
                 &[format!(
-                    "second simulated experiment of the wafer stage seed {}, phases and noise seed {vseed}",
+                    "second simulated experiment of the wafer stage seed {}, phases and noise seed {vseed}; {periods} periods x {realizations} realizations",
                     args.seed
                 )],
             )
@@ -318,8 +318,12 @@ pub fn run(args: Args) -> Result<(), Error> {
                 .to_model()
                 .stage("model.json")?;
             let grid = model.response_at(&vdata.omegas());
-            let v = validate_frf(&grid, &vdata, None, &FrfValidationConfig::default())
-                .stage("validation")?;
+            let vcfg = FrfValidationConfig {
+                // the variance is estimated from the realizations of the experiment
+                variance_dof: Some(2.0 * (realizations as f64 - 1.0)),
+                ..FrfValidationConfig::default()
+            };
+            let v = validate_frf(&grid, &vdata, None, &vcfg).stage("validation")?;
             write_validation_dir(
                 &vdir,
                 "../model.json",

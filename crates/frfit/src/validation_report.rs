@@ -84,6 +84,15 @@ pub fn markdown(
          joint level over all lines and inputs",
         v.alpha
     );
+    let _ = writeln!(
+        s,
+        "- variance: {}",
+        v.variance_dof.map_or_else(
+            || "taken as exact (the file does not say how many realizations it was estimated from)"
+                .to_string(),
+            |d| format!("estimated with {d} degrees of freedom (F(2, {d}) radii)")
+        )
+    );
     let _ = writeln!(s, "- **verdict: {}**", verdict_text(v.verdict));
     let _ = writeln!(
         s,

@@ -191,6 +191,30 @@ impl DisturbanceModel {
         })
     }
 
+    /// The factor on the radii when the variance was estimated with `dof` real degrees
+    /// of freedom instead of known, at per-component level `alpha_c`: a complex Gaussian
+    /// `e` with variance `s^2` has `2 |e|^2 / s^2 ~ chi^2(2)`, the estimate `v` (independent
+    /// of the mean) has `dof v / s^2 ~ chi^2(dof)`, so `|e|^2 / v ~ F(2, dof)` and the
+    /// radius `sqrt(v F_{2,dof}(alpha_c))` replaces `sqrt(v c_chi / 2)`. The factor is
+    /// `sqrt(2 F_{2,dof}(alpha_c) / c_chi) >= 1`, tending to 1 as `dof` grows.
+    pub fn estimated_variance_factor(alpha_c: f64, dof: f64) -> f64 {
+        let c_chi = chi2_2_quantile(alpha_c);
+        let c_f = crate::stats::f_isf(1.0 - alpha_c, 2.0, dof);
+        if c_f.is_finite() && c_chi > 0.0 {
+            (2.0 * c_f / c_chi).sqrt().max(1.0)
+        } else {
+            1.0
+        }
+    }
+
+    /// The same model with every radius times `factor`.
+    pub fn scaled(mut self, factor: f64) -> Self {
+        for v in &mut self.v_tilde {
+            *v *= factor;
+        }
+        self
+    }
+
     /// Proposition 10 / eq. (25): the model of the mean over `n_per` periods (radii
     /// divided by `sqrt(n_per)`).
     pub fn averaged(&self, n_per: usize) -> Self {

@@ -59,6 +59,13 @@ pub struct FrfValidationConfig {
     pub method: GammaMethod,
     /// Bisection settings for [`GammaMethod::Mu`].
     pub gamma: GammaConfig,
+    /// Real degrees of freedom of the data's variance when it was estimated (`2 (R - 1)`
+    /// for `R` realizations); `None` (default): the variance is taken as exact. With an
+    /// estimated variance `|e|^2 / var_hat` of a complex Gaussian `e` is `F(2, d)`
+    /// distributed, not `chi^2(2) / 2`: the radii use the `F(2, d)` quantile
+    /// ([`DisturbanceModel::with_estimated_variance`]), so that a model at the truth is
+    /// not invalidated by a variance estimated from few realizations.
+    pub variance_dof: Option<f64>,
 }
 
 impl Default for FrfValidationConfig {
@@ -68,6 +75,7 @@ impl Default for FrfValidationConfig {
             coverage: Coverage::JointOutputs,
             method: GammaMethod::ClosedForm,
             gamma: GammaConfig::default(),
+            variance_dof: None,
         }
     }
 }
@@ -113,6 +121,10 @@ pub struct FrfValidation {
     /// Lines where the disturbance alone does not explain the residual at the joint
     /// level (the verdict's evidence).
     pub lines_invalidated_at_zero: usize,
+    /// Degrees of freedom of the estimated variance the radii account for (`None`: the
+    /// variance was taken as exact).
+    #[serde(default)]
+    pub variance_dof: Option<f64>,
 }
 
 /// Validates the model response `model` (at the data's lines) against the validation
@@ -158,6 +170,22 @@ pub fn validate_frf(
         }
     }
     let joint = Coverage::JointLines { n_lines: nl * nu };
+    if let Some(d) = cfg.variance_dof {
+        if !(d.is_finite() && d > 0.0) {
+            return Err(ValidationError::config(
+                "variance_dof",
+                d,
+                "degrees of freedom of the variance estimate must be > 0 (2 (R - 1) for R realizations)",
+            ));
+        }
+    }
+    // the widening of the radii for an estimated variance, once per coverage
+    let widen = |cov: Coverage| {
+        cfg.variance_dof.map_or(1.0, |d| {
+            DisturbanceModel::estimated_variance_factor(cov.per_component_alpha(cfg.alpha, ny), d)
+        })
+    };
+    let (widen_line, widen_joint) = (widen(cfg.coverage), widen(joint));
     let unc = UncertaintyModel::additive(ny, nu);
     let mut lines = Vec::with_capacity(nl);
     let mut n_invalid = 0;
@@ -218,7 +246,7 @@ pub fn validate_frf(
                     None => DisturbanceModel::from_variances(colvar, cfg.alpha, cov),
                 }
             };
-            let dist = cov_col(cfg.coverage)?;
+            let dist = cov_col(cfg.coverage)?.scaled(widen_line);
             let line = LineData {
                 w: (0..nu)
                     .map(|c| C64::new(if c == j { 1.0 } else { 0.0 }, 0.0))
@@ -242,7 +270,7 @@ pub fn validate_frf(
                 r[(i, j)] = rj[i];
             }
             // the verdict at the joint level: does the disturbance alone explain it?
-            let dj = cov_col(joint)?;
+            let dj = cov_col(joint)?.scaled(widen_joint);
             let (g0, _) = min_gamma_additive(&line, &dj)?;
             if g0 > 0.0 {
                 invalid_here = true;
@@ -271,5 +299,6 @@ pub fn validate_frf(
         },
         lines_invalidated_at_zero: n_invalid,
         lines,
+        variance_dof: cfg.variance_dof,
     })
 }

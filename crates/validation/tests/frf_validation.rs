@@ -150,3 +150,41 @@ fn bad_input_is_reported() {
     .unwrap_err();
     assert!(e.to_string().contains("alpha"), "{e}");
 }
+
+/// With a variance estimated from R realizations, the F(2, 2(R-1)) radii cover a
+/// complex Gaussian error with probability alpha, where the chi-square radii (variance
+/// taken as exact) cover less (Monte Carlo, 20000 draws, R = 4, alpha = 0.99).
+#[test]
+fn estimated_variance_radii_keep_their_coverage() {
+    use validation::disturbance::DisturbanceModel;
+    let (alpha, r) = (0.99, 4usize);
+    let dof = 2.0 * (r as f64 - 1.0);
+    let factor = DisturbanceModel::estimated_variance_factor(alpha, dof);
+    assert!(factor > 1.0);
+    assert!(DisturbanceModel::estimated_variance_factor(alpha, 1e6) < 1.0 + 1e-3);
+    assert!(DisturbanceModel::estimated_variance_factor(alpha, 2.0 * dof) < factor);
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let cgauss = |rng: &mut ChaCha8Rng| {
+        let (a, b): (f64, f64) = (StandardNormal.sample(rng), StandardNormal.sample(rng));
+        C64::new(a, b) / 2f64.sqrt() // E|z|^2 = 1
+    };
+    let n = 20_000;
+    let (mut inside_f, mut inside_chi) = (0usize, 0usize);
+    for _ in 0..n {
+        // R realizations of a unit-variance complex scalar: the mean, its variance
+        // estimate (sample variance / R), and an independent error of the mean
+        let xs: Vec<C64> = (0..r).map(|_| cgauss(&mut rng)).collect();
+        let mean = xs.iter().sum::<C64>() / r as f64;
+        let var_hat =
+            xs.iter().map(|x| (x - mean).norm_sqr()).sum::<f64>() / (r as f64 - 1.0) / r as f64;
+        let e = cgauss(&mut rng) / (r as f64).sqrt();
+        let dist = DisturbanceModel::from_variances(&[var_hat], alpha, Default::default()).unwrap();
+        let radius = dist.max_radius();
+        inside_chi += usize::from(e.norm() <= radius);
+        inside_f += usize::from(e.norm() <= radius * factor);
+    }
+    let (pf, pc) = (inside_f as f64 / n as f64, inside_chi as f64 / n as f64);
+    println!("coverage with F radii {pf:.4}, with chi-square radii {pc:.4}");
+    assert!((pf - alpha).abs() < 0.004, "F coverage {pf}");
+    assert!(pc < alpha - 0.02, "chi-square coverage {pc}");
+}

@@ -113,6 +113,12 @@ pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitErr
             Method::ClosedForm => GammaMethod::ClosedForm,
             Method::Mu => GammaMethod::Mu,
         },
+        // a variance estimated from R realizations (the file's comments or metadata say
+        // how many) has 2 (R - 1) real degrees of freedom
+        variance_dof: frfit::declared::declared(&data)
+            .realizations
+            .filter(|&r| r >= 2)
+            .map(|r| 2.0 * (r as f64 - 1.0)),
         ..Default::default()
     };
     let v = validate_frf(&grid, &data, None, &cfg).map_err(|e| FrfitError::Fit {
