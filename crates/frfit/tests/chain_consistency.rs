@@ -120,6 +120,25 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+
+    /// The fallback the multi-initialiser chain gives: `--init auto --refine riv` (every
+    /// initialiser, the smallest final prediction error kept) recovers noise-free data
+    /// where the CMIF start alone does not (seeds 1-12, 1142, 1149, 1575 of the ignored
+    /// property: cmif+riv 1.9e-6 .. 1.3e-1, auto+riv below 1.5e-14).
+    #[test]
+    fn auto_chain_recovers_noise_free_data(seed in 0u64..10_000, hold in any::<bool>()) {
+        let truth = system(seed, hold);
+        let d = data(&truth, 600, 0.0, seed);
+        let r = run_chain(&d, "auto", "riv", &settings(&truth), &AdditiveOptions::default())
+            .unwrap_or_else(|e| panic!("auto+riv on seed {seed}: {e}"));
+        let e = error(&r.model.model, &truth, &d);
+        prop_assert!(e < 1e-8, "auto+riv, seed {seed}, hold {hold}: median error {e:.3e}");
+        prop_assert_eq!(r.runs.len(), INITIALIZERS.len());
+    }
+}
+
 #[test]
 #[ignore = "fails for cmif+riv on seed 17: 4x the lines lowers the median error only 1.3x (2.34e-5 -> 1.81e-5 at noise 1e-3); cmif+ml on seed 3 ends at an unstable optimum (spurious start modes at 53 and 86 Hz), reported as an error; run with --ignored"]
 fn error_falls_with_the_noise_and_with_the_lines() {
