@@ -409,11 +409,21 @@ pub fn final_prediction_error(
     weighting: &frf_data::Weighting,
 ) -> f64 {
     use frf_data::ModelStructure;
+    weighted_cost(&model.model, data, weighting).map_or(f64::INFINITY, |v| {
+        fpe_of_cost(v, model.model.n_params(), data)
+    })
+}
+
+/// `V (N + p) / (N - p)` for a weighted cost `V` already evaluated, `p` real parameters
+/// and `N` twice the lines times entries of `data`; infinite when `p >= N` or `V` is
+/// not finite.
+fn fpe_of_cost(v: f64, p: usize, data: DynData<'_>) -> f64 {
     let n = 2.0 * (data.n_lines() * data.n_entries()) as f64;
-    let p = model.model.n_params() as f64;
-    match weighted_cost(&model.model, data, weighting) {
-        Ok(v) if n > p && v.is_finite() => v * (n + p) / (n - p),
-        _ => f64::INFINITY,
+    let p = p as f64;
+    if n > p && v.is_finite() {
+        v * (n + p) / (n - p)
+    } else {
+        f64::INFINITY
     }
 }
 
@@ -457,11 +467,14 @@ pub fn run_chain(
     for name in &names {
         match run_single(data, name, refine, s, o) {
             Ok(r) => {
-                let fpe = final_prediction_error(&r.model, data, &s.weighting);
+                // one evaluation of the model on the data serves the cost and the FPE
+                let cost = weighted_cost(&r.model.model, data, &s.weighting).ok();
+                let n_params = r.model.model.n_params();
+                let fpe = cost.map_or(f64::INFINITY, |v| fpe_of_cost(v, n_params, data));
                 runs.push(ChainRun {
                     chain: r.chain.clone(),
-                    cost: weighted_cost(&r.model.model, data, &s.weighting).ok(),
-                    n_params: Some(r.model.model.n_params()),
+                    cost,
+                    n_params: Some(n_params),
                     fpe: Some(fpe),
                     error: None,
                     kept: false,

@@ -43,13 +43,15 @@ pub struct Matrices {
     pub d: Vec<Vec<f64>>,
 }
 
+/// The rows of `m`.
+fn rows(m: &faer::Mat<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect())
+        .collect()
+}
+
 impl Matrices {
     fn of(ss: &StateSpace) -> Self {
-        let rows = |m: &faer::Mat<f64>| -> Vec<Vec<f64>> {
-            (0..m.nrows())
-                .map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect())
-                .collect()
-        };
         Self {
             a: rows(&ss.a),
             b: rows(&ss.b),
@@ -205,11 +207,7 @@ pub fn export_state_space(
             delay_s: f.delay_s,
             derivative_order: f.derivative_order,
             hold: f.hold.name(),
-            crosstalk: f.crosstalk.as_ref().map(|x| {
-                (0..x.nrows())
-                    .map(|i| (0..x.ncols()).map(|j| x[(i, j)]).collect())
-                    .collect()
-            }),
+            crosstalk: f.crosstalk.as_ref().map(rows),
             dynamics: f.dynamics.clone(),
         },
         units,
