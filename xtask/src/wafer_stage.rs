@@ -20,7 +20,7 @@ use experiment::synth::{
 };
 use frf_data::truth::Truth;
 use frf_data::ModelStructure;
-use frf_data::{FrfDataset, ProgressSink};
+use frf_data::{Frf, FrfDataset, ProgressSink, C64};
 use frfit::additive_riv::{Hold, ModelFile};
 use frfit::pipeline::{self, PipelineConfig, PipelineOutput};
 use frfit::report::write_report;
@@ -323,7 +323,16 @@ pub fn run(args: Args) -> Result<(), Error> {
                 variance_dof: Some(2.0 * (realizations as f64 - 1.0)),
                 ..FrfValidationConfig::default()
             };
-            let v = validate_frf(&grid, &vdata, None, &vcfg).stage("validation")?;
+            // the estimator's disturbance covariance C_v of the band's lines: the shape
+            // across outputs of each line's disturbance model (Prop. 9, eqs. 16-18)
+            let cv = band_covariance(&est2.frf, est2.disturbance_covariance.as_deref(), lo, hi);
+            if cv.is_none() {
+                eprintln!(
+                    "note: the second experiment gives no disturbance covariance; the \
+                     per-entry variances are used"
+                );
+            }
+            let v = validate_frf(&grid, &vdata, cv.as_deref(), &vcfg).stage("validation")?;
             write_validation_dir(
                 &vdir,
                 "../model.json",
@@ -387,6 +396,23 @@ pub fn run(args: Args) -> Result<(), Error> {
     }
     println!("  {:<16} {:>7.2} s", "total", t_all.elapsed().as_secs_f64());
     Ok(())
+}
+
+/// The disturbance covariance `C_v` (`ny x ny` per line, line after line) of the lines of
+/// `frf` inside `lo..=hi` Hz (the band `Frf::band` cuts), or `None` when there is none.
+fn band_covariance(frf: &Frf, cv: Option<&[C64]>, lo: f64, hi: f64) -> Option<Vec<C64>> {
+    let cv = cv?;
+    let ny = frf.ny();
+    let m = ny * ny;
+    if cv.len() != frf.n_lines() * m {
+        return None;
+    }
+    Some(
+        (0..frf.n_lines())
+            .filter(|&k| (lo..=hi).contains(&frf.freq_hz(k)))
+            .flat_map(|k| cv[k * m..(k + 1) * m].iter().copied())
+            .collect(),
+    )
 }
 
 #[cfg(test)]
