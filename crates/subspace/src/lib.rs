@@ -12,7 +12,8 @@
 //! 2. [`projection`]: the real data matrix (10), the input term removed by a QR that
 //!    exploits the input structure and runs over blocks of lines (cost linear in the
 //!    lines), optional noise-covariance weighting, one SVD;
-//! 3. [`order`]: the order given or from the largest gap of the singular values;
+//! 3. [`order`]: the order given, from the singular values (noise threshold or largest
+//!    gap), or by an F test on the refitted `B`, `D` around the singular-value proposal;
 //! 4. [`realization`]: `A`, `C` from (12), `B`, `D` from (17), the exact map back to
 //!    continuous time;
 //! 5. [`currency`]: exact continuous poles (`s = ln(z)/Ts` or the inverse bilinear map),
@@ -30,3 +31,4 @@ pub mod realization;
 
 pub use error::SubspaceError;
 pub use estimator::{Conditioning, Identified, SubspaceConfig, SubspaceInit, SubspaceReport};
+pub use order::{OrderRule, OrderScore};
