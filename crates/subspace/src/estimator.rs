@@ -10,7 +10,6 @@ use crate::prepare::{prepare, Variable};
 use crate::projection::project;
 use crate::realization::{bilinear_to_continuous, fit_b_d, shift_a_c};
 use crate::SubspaceError;
-use faer::Mat;
 use frf_data::chain::weighted_cost;
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
 use frf_data::{Convergence, DelayChoice, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
@@ -519,6 +518,33 @@ impl SubspaceInit {
                     "{} integrators added to the rigid-body part by the F test (the singular values gave {k0}: a rigid body weak at the lowest lines hides in the noise of the singular values)",
                     ps.integrators - k0
                 ));
+                // Second pass: the flexible poles of the first were estimated with the
+                // rigid body missing or only partly in the states (one state for a
+                // double integrator), which biases them. The fitted rigid-body part is
+                // subtracted and the subspace step repeated on the flexible part alone.
+                if cfg.order.is_none() {
+                    let t2 = Instant::now();
+                    if let Some(second) = self.flexible_pass(
+                        &prepared, &model, r, ny, inverse_variance, &g, &factors, &ps, data, &weighting,
+                    )? {
+                        if second.cost < cost {
+                            messages.push(format!(
+                                "second pass on the data with the rigid body subtracted: order {} for the flexible part, cost {:.4e} -> {:.4e} (kept)",
+                                second.order, cost, second.cost
+                            ));
+                            ps = second.poles;
+                            model = second.model;
+                            cond_res = second.cond;
+                            cost = second.cost;
+                        } else {
+                            messages.push(format!(
+                                "second pass on the data with the rigid body subtracted: order {}, cost {:.4e} not below {:.4e} (not kept)",
+                                second.order, second.cost, cost
+                            ));
+                        }
+                    }
+                    timings.push(("flexible pass".to_string(), t2.elapsed().as_secs_f64()));
+                }
             }
         }
         timings.push(("residues".to_string(), t.elapsed().as_secs_f64()));
@@ -634,6 +660,93 @@ fn sv_proposal(
                 gap.exp()
             ),
         )
+    }
+}
+
+/// The result of [`SubspaceInit::flexible_pass`].
+struct FlexiblePass {
+    order: usize,
+    poles: PoleSet,
+    model: FrfModel,
+    cond: f64,
+    cost: f64,
+}
+
+impl SubspaceInit {
+    /// The subspace step repeated on the data with the rigid-body part of `model`
+    /// subtracted: projection, order from the singular values, (12), (17), poles; the
+    /// integrators of `ps` are kept and all residues refitted on the full data.
+    #[allow(clippy::too_many_arguments)]
+    fn flexible_pass<D: FrfDataset + ?Sized>(
+        &self,
+        prepared: &crate::prepare::Prepared,
+        model: &FrfModel,
+        r: usize,
+        ny: usize,
+        inverse_variance: bool,
+        g: &[C64],
+        factors: &KnownFactors,
+        ps: &PoleSet,
+        data: &D,
+        weighting: &Weighting,
+    ) -> Result<Option<FlexiblePass>, SubspaceError> {
+        let cfg = &self.config;
+        let mut rigid = FrfModel {
+            modal: realize::ModalModel::new(model.ny(), model.nu()),
+            factors: factors.clone(),
+        };
+        rigid.modal.rigid = model.modal.rigid.clone();
+        let gr = rigid.freq_response(&prepared.omega)?;
+        let mut flex = prepared.clone();
+        let m = prepared.ny * prepared.nu;
+        for k in 0..prepared.n_lines() {
+            let inv = factors.scalar_at(prepared.omega[k]).inv();
+            let line = gr.line(k);
+            for e in 0..m {
+                flex.h[k * m + e] -= line[e] * inv;
+            }
+        }
+        let proj = project(&flex, r)?;
+        let sv = &proj.singular_values;
+        let rank = numerical_rank(sv);
+        if rank == 0 {
+            return Ok(None);
+        }
+        let n_max = ((r - 1) * ny).min(rank).min(cfg.max_order);
+        let (n, _) = sv_proposal(sv, n_max, inverse_variance, cfg.noise_threshold);
+        let o = proj.observability(n);
+        let Ok((a, c, _)) = shift_a_c(&o, ny) else {
+            return Ok(None);
+        };
+        let (b, _, _, _) = fit_b_d(&flex, &a, &c)?;
+        let (eig, w) = eigen_weights(&a, &b, &c)?;
+        let mut poles = classify(
+            &eig,
+            &w,
+            prepared.variable,
+            prepared.omega[0],
+            cfg.rigid_fraction,
+            cfg.max_integrators,
+            cfg.merge_tol,
+        );
+        poles.integrators = poles.integrators.max(ps.integrators);
+        let (model, cond) = fit_residues(
+            model.ny(),
+            model.nu(),
+            &prepared.omega,
+            g,
+            &prepared.w,
+            &poles,
+            factors,
+        )?;
+        let cost = weighted_cost(&model, data, weighting)?;
+        Ok(Some(FlexiblePass {
+            order: n,
+            poles,
+            model,
+            cond,
+            cost,
+        }))
     }
 }
 

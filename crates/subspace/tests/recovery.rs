@@ -107,7 +107,8 @@ proptest! {
     }
 }
 
-fn error_falls(seed: u64, hold: bool, rigid: bool) {
+/// Median (over 3 noise realisations) error at relative noise 1e-3, 1e-4, 1e-5.
+fn errors(seed: u64, hold: bool, rigid: bool) -> [f64; 3] {
     faer::set_global_parallelism(faer::Par::Seq);
     let truth = system(seed, hold, rigid);
     let run = |noise: f64| -> f64 {
@@ -121,8 +122,16 @@ fn error_falls(seed: u64, hold: bool, rigid: bool) {
         e.sort_by(|a, b| a.total_cmp(b));
         e[1]
     };
-    let (e3, e4, e5) = (run(1e-3), run(1e-4), run(1e-5));
-    println!("seed {seed} hold {hold} rigid {rigid}: noise 1e-3 -> {e3:.3e}, 1e-4 -> {e4:.3e}, 1e-5 -> {e5:.3e}");
+    let e = [run(1e-3), run(1e-4), run(1e-5)];
+    println!(
+        "seed {seed} hold {hold} rigid {rigid}: noise 1e-3 -> {:.3e}, 1e-4 -> {:.3e}, 1e-5 -> {:.3e}",
+        e[0], e[1], e[2]
+    );
+    e
+}
+
+fn error_falls(seed: u64, hold: bool, rigid: bool) {
+    let [e3, e4, e5] = errors(seed, hold, rigid);
     assert!(e3 / e4 >= 5.0, "seed {seed}: {e3:.3e} -> {e4:.3e}");
     assert!(e4 / e5 >= 5.0, "seed {seed}: {e4:.3e} -> {e5:.3e}");
 }
@@ -132,12 +141,36 @@ fn the_error_falls_with_the_noise_through_the_hold() {
     error_falls(3, true, true);
 }
 
+/// These systems failed before the merged poles were weighted by their residues and the
+/// rigid-body integrators were F-tested (seed 29: 5.4e-5 -> 7.6e-5 -> 2.7e-5, a weak
+/// rigid body never found and a rank-2 residue's pole moved by the plain mean; seed 21
+/// 5.8e-5 -> 2.4e-5 -> 6.7e-7; seed 17 5.5e-5 -> 2.0e-5 -> 3.7e-7).
 #[test]
-#[ignore = "fails on these systems: seed 29 (hold, rigid) median error 5.4e-5 -> 7.6e-5 -> 2.7e-5 and seed 21 (continuous) 5.8e-5 -> 2.4e-5 -> 6.7e-7 for noise 1e-3 -> 1e-4 -> 1e-5; seed 17 (continuous, weak rigid body) 5.5e-5 -> 2.0e-5 -> 3.7e-7: the error does not fall 5x per decade everywhere (not yet diagnosed: order choice or pole merging at some noise levels); run with --ignored"]
 fn the_error_falls_with_the_noise_on_more_systems() {
     error_falls(29, true, true);
     error_falls(21, false, false);
     error_falls(17, false, true);
+}
+
+fn cases(default: u32) -> u32 {
+    std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases(6), ..ProptestConfig::default() })]
+
+    /// The error falls with the noise on random systems: at least 5x per decade of
+    /// noise from 1e-3 to 1e-5 (the estimate is consistent, so the error is
+    /// proportional to the noise once the structure is found).
+    #[test]
+    #[ignore = "fails on some systems with a weak rigid body through the hold: seed 95102 (3 x 2, hold, rigid) median error 6.0e-5 -> 3.4e-5 -> 3.9e-6 and seed 71327 (hold, rigid) 6.1e-5 -> 5.8e-6 -> 1.4e-6 for noise 1e-3 -> 1e-4 -> 1e-5 (on 95102 the lowest mode has a rank-2 residue whose pole noise splits; the merged pole stays 6e-5 relative off, and the residue refit cannot move a pole); 21 other random cases passed before the first failure; run with --ignored"]
+    fn the_error_falls_with_the_noise(seed in 0u64..100_000, hold in any::<bool>(), rigid in any::<bool>()) {
+        let [e3, e4, e5] = errors(seed, hold, rigid);
+        prop_assert!(e3 / e4 >= 5.0 && e4 / e5 >= 5.0, "seed {seed} hold {hold} rigid {rigid}: {e3:.3e} -> {e4:.3e} -> {e5:.3e}");
+    }
 }
 
 /// Without a rigid body: a weak double integrator below the band (1/s^2 some 2000 times
