@@ -44,9 +44,10 @@ pub struct SubspaceConfig {
     pub order: Option<usize>,
     /// Largest order considered when it is chosen from the data. Default: 60.
     pub max_order: usize,
-    /// How the order is chosen when it is not given (see [`OrderRule`]). Default:
-    /// [`OrderRule::Auto`] (the F test when the weighting is the data's inverse
-    /// variance, the singular values otherwise).
+    /// How the order is chosen when it is not given, and whether the significance tests
+    /// run (see [`OrderRule`]). Default: [`OrderRule::Auto`] (the order from the
+    /// singular values; the rigid-body integrators F-tested when the weighting is the
+    /// data's inverse variance).
     pub order_rule: OrderRule,
     /// Significance level of the order F test (the diagnosis's and the SK sweep's
     /// default). Default: 1e-3.
@@ -377,18 +378,31 @@ impl SubspaceInit {
                     let t = Instant::now();
                     let settings = SweepSettings {
                         range: (n0.saturating_sub(cfg.sweep_below).max(1), n_max),
-                        outputs: ny,
-                        inputs: nu,
                         observations: prepared.w.iter().filter(|&&w| w > 0.0).count(),
                         alpha: cfg.order_alpha,
                         patience: cfg.sweep_patience.max(1),
                         exact_cost: EXACT_REL_COST * prepared.energy(),
                     };
+                    let g = data.values_vec();
                     let (chosen, scores) = f_sweep(&settings, |n| {
                         let o = proj.observability(n);
                         let (a, c, _) = shift_a_c(&o, ny).ok()?;
-                        let (_, _, _, cost) = fit_b_d(&prepared, &a, &c).ok()?;
-                        Some(cost * 2.0 * nl as f64)
+                        let (b, _, _, _) = fit_b_d(&prepared, &a, &c).ok()?;
+                        let (eig, w) = eigen_weights(&a, &b, &c).ok()?;
+                        let ps = classify(
+                            &eig,
+                            &w,
+                            prepared.variable,
+                            prepared.omega[0],
+                            cfg.rigid_fraction,
+                            cfg.max_integrators,
+                            cfg.merge_tol,
+                        );
+                        let (model, _) =
+                            fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)
+                                .ok()?;
+                        let cost = weighted_cost(&model, data, &weighting).ok()?;
+                        Some((cost * 2.0 * nl as f64, currency_params(&ps, ny * nu)))
                     });
                     timings.push(("order F test".to_string(), t.elapsed().as_secs_f64()));
                     order_sweep = scores;
@@ -398,7 +412,7 @@ impl SubspaceInit {
                             (
                                 n,
                                 format!(
-                                    "F test on the refitted B, D (17) at alpha {:.0e}, orders {}..={} from {sv_rule}{}",
+                                    "F test on the refitted residues of the poles of (12) with B, D of (17), alpha {:.0e}, orders {}..={} from {sv_rule}{}",
                                     cfg.order_alpha,
                                     settings.range.0,
                                     order_sweep.last().map_or(n, |s| s.order),
@@ -479,9 +493,7 @@ impl SubspaceInit {
             // the rigid-body integrators the singular values missed (see `integrator_test`)
             let m = ny * nu;
             let observations = prepared.w.iter().filter(|&&w| w > 0.0).count();
-            let params = |ps: &PoleSet| {
-                2 * ps.pairs.len() * (1 + m) + ps.reals.len() * (1 + m) + (ps.integrators + 1) * m
-            };
+            let params = |ps: &PoleSet| currency_params(ps, m);
             let k0 = ps.integrators;
             for k in k0 + 1..=cfg.max_integrators {
                 let mut trial = ps.clone();
@@ -525,7 +537,16 @@ impl SubspaceInit {
                 if cfg.order.is_none() {
                     let t2 = Instant::now();
                     if let Some(second) = self.flexible_pass(
-                        &prepared, &model, r, ny, inverse_variance, &g, &factors, &ps, data, &weighting,
+                        &prepared,
+                        &model,
+                        r,
+                        ny,
+                        inverse_variance,
+                        &g,
+                        &factors,
+                        &ps,
+                        data,
+                        &weighting,
                     )? {
                         if second.cost < cost {
                             messages.push(format!(
@@ -581,7 +602,10 @@ impl SubspaceInit {
                                     if s.kept { ">" } else { "<=" }
                                 ),
                                 _ if s.cost.is_none() => ": not realisable".to_string(),
-                                _ => ": start".to_string(),
+                                _ if s.kept && s.order == order_sweep[0].order =>
+                                    ": start".to_string(),
+                                _ if s.kept => ": no more parameters, lower cost".to_string(),
+                                _ => ": no more parameters".to_string(),
                             }
                         ))
                         .collect::<Vec<_>>()
@@ -629,6 +653,13 @@ impl SubspaceInit {
 /// sweep takes a fit as exact (a relative rms error of 1e-8) and stops: beyond it the
 /// residual is roundoff, not noise.
 const EXACT_REL_COST: f64 = 1e-16;
+
+/// Free real parameters of the currency with the poles `ps` and `m` entries: a pole
+/// pair 2 and a complex residue per entry, a real pole 1 and a real residue per entry,
+/// an integrator and the feedthrough a coefficient per entry.
+fn currency_params(ps: &PoleSet, m: usize) -> usize {
+    2 * ps.pairs.len() * (1 + m) + ps.reals.len() * (1 + m) + (ps.integrators + 1) * m
+}
 
 /// The singular-value proposal of the order (see [`crate::order`]): the count above
 /// `threshold` times the noise level with inverse-variance weighting (when there is
