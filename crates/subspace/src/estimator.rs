@@ -52,6 +52,12 @@ pub struct SubspaceConfig {
     /// Significance level of the order F test (the diagnosis's and the SK sweep's
     /// default). Default: 1e-3.
     pub order_alpha: f64,
+    /// Practical-significance floor of the F statistics of the order sweep and the
+    /// integrator test (the diagnosis's `min_f`: measured noise is heavier-tailed than
+    /// Gaussian, and a state placed by the subspace step absorbs the misfit of the other
+    /// subspace poles, which are not maximum-likelihood estimates; such states reach F
+    /// of 2..10, real ones 1e3 and more). Default: 25.
+    pub order_min_f: f64,
     /// The F-test sweep starts this many orders below the singular-value proposal.
     /// Default: 4.
     pub sweep_below: usize,
@@ -97,6 +103,7 @@ impl Default for SubspaceConfig {
             max_order: 60,
             order_rule: OrderRule::Auto,
             order_alpha: 1e-3,
+            order_min_f: 25.0,
             sweep_below: 4,
             sweep_patience: 4,
             block_rows: None,
@@ -233,6 +240,13 @@ impl SubspaceInit {
                 "order_alpha",
                 c.order_alpha,
                 "the significance level must be in (0, 0.5)",
+            ));
+        }
+        if !(c.order_min_f.is_finite() && c.order_min_f >= 0.0) {
+            return Err(SubspaceError::invalid(
+                "order_min_f",
+                c.order_min_f,
+                "must be finite and >= 0",
             ));
         }
         if c.order.is_none() && c.max_order == 0 {
@@ -380,6 +394,7 @@ impl SubspaceInit {
                         range: (n0.saturating_sub(cfg.sweep_below).max(1), n_max),
                         observations: prepared.w.iter().filter(|&&w| w > 0.0).count(),
                         alpha: cfg.order_alpha,
+                        min_f: cfg.order_min_f,
                         patience: cfg.sweep_patience.max(1),
                         exact_cost: EXACT_REL_COST * prepared.energy(),
                     };
@@ -509,7 +524,7 @@ impl SubspaceInit {
                     observations,
                     params(&trial),
                 );
-                let fc = f_critical(dp, cfg.order_alpha);
+                let fc = f_critical(dp, cfg.order_alpha).max(cfg.order_min_f);
                 messages.push(format!(
                     "rigid body: {k} integrators against {}: F = {f:.3e} {} {fc:.3} (alpha {:.0e}), cost {:.4e} -> {:.4e}",
                     ps.integrators,

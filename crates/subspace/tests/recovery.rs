@@ -166,7 +166,7 @@ proptest! {
     /// noise from 1e-3 to 1e-5 (the estimate is consistent, so the error is
     /// proportional to the noise once the structure is found).
     #[test]
-    #[ignore = "fails on some systems with a weak rigid body through the hold: seed 95102 (3 x 2, hold, rigid) median error 6.0e-5 -> 3.4e-5 -> 3.9e-6 and seed 71327 (hold, rigid) 6.1e-5 -> 5.8e-6 -> 1.4e-6 for noise 1e-3 -> 1e-4 -> 1e-5 (on 95102 the lowest mode has a rank-2 residue whose pole noise splits; the merged pole stays 6e-5 relative off, and the residue refit cannot move a pole); 21 other random cases passed before the first failure; run with --ignored"]
+    #[ignore = "fails on some systems through the hold: seed 59664 (hold, no rigid body) 2.7e-4 -> 1.1e-5 -> 3.8e-6, seed 95102 (3 x 2, hold, rigid) median error 6.0e-5 -> 3.4e-5 -> 3.9e-6 and seed 71327 (hold, rigid) 6.1e-5 -> 5.8e-6 -> 1.4e-6 for noise 1e-3 -> 1e-4 -> 1e-5 (on 95102 the lowest mode has a rank-2 residue whose pole noise splits; the merged pole stays 6e-5 relative off, and the residue refit cannot move a pole); 21 other random cases passed before the first failure; run with --ignored"]
     fn the_error_falls_with_the_noise(seed in 0u64..100_000, hold in any::<bool>(), rigid in any::<bool>()) {
         let [e3, e4, e5] = errors(seed, hold, rigid);
         prop_assert!(e3 / e4 >= 5.0 && e4 / e5 >= 5.0, "seed {seed} hold {hold} rigid {rigid}: {e3:.3e} -> {e4:.3e} -> {e5:.3e}");
@@ -290,9 +290,10 @@ proptest! {
         f_test_order(seed, hold, 0.0)?;
     }
 
-    /// The same with a relative noise of 1e-4 and its variance.
+    /// The same with a relative noise of 1e-4 and its variance (without the
+    /// practical-significance floor `order_min_f` the sweep kept spurious states here:
+    /// seed 33525, true order 6, kept 8 with F = 9.9 and ended at 13).
     #[test]
-    #[ignore = "the F test on the subspace poles is liberal with noise: seed 33525 (hold, rank 1, true order 6) keeps order 8 (F = 9.9 against 3.78) and ends at 13, the added poles absorbing the misfit of the subspace poles (not maximum-likelihood estimates) rather than noise; 15 random cases passed before; run with --ignored"]
     fn the_f_test_chooses_the_true_order_with_noise(seed in 0u64..100_000, hold in any::<bool>()) {
         f_test_order(seed, hold, 1e-4)?;
     }
