@@ -49,6 +49,9 @@ pub struct PoleSet {
     pub reflected: Vec<ReflectedPole>,
     /// Notes (eigenvalues that have no continuous image).
     pub notes: Vec<String>,
+    /// For every pole pair, the eigenvalues (upper, continuous) merged into it (one
+    /// for a pole that was not merged).
+    pub pair_members: Vec<Vec<C64>>,
 }
 
 /// Classifies the eigenvalues `eig` of the identified `A` (see the module
@@ -122,8 +125,9 @@ pub fn classify(
     ps.integrators = ps.at_origin.min(max_integrators);
     pair_w.sort_by(|a, b| a.0.norm().total_cmp(&b.0.norm()));
     real_w.sort_by(|a, b| b.0.re.total_cmp(&a.0.re));
-    let (pairs, merged_p) = merge(&pair_w, merge_tol);
-    let (reals, merged_r) = merge(&real_w, merge_tol);
+    let (pairs, pair_members, merged_p) = merge(&pair_w, merge_tol);
+    let (reals, _, merged_r) = merge(&real_w, merge_tol);
+    ps.pair_members = pair_members;
     if merged_p + merged_r > 0 {
         ps.notes.push(format!(
             "{} repeated poles (a residue of rank > 1, or a pole split by noise; within {merge_tol:.0e} relative) merged: one residue matrix each",
@@ -138,23 +142,26 @@ pub fn classify(
 /// Merges poles (sorted by modulus) closer than `tol` relative to a group's weighted
 /// mean into that mean (weights: the residue sizes, see [`classify`]); returns the
 /// poles and how many were merged away.
-fn merge(poles: &[(C64, f64)], tol: f64) -> (Vec<C64>, usize) {
-    // (weighted sum, weight sum)
-    let mut out: Vec<(C64, f64)> = Vec::new();
+fn merge(poles: &[(C64, f64)], tol: f64) -> (Vec<C64>, Vec<Vec<C64>>, usize) {
+    // (weighted sum, weight sum, members)
+    let mut out: Vec<(C64, f64, Vec<C64>)> = Vec::new();
     let mut merged = 0;
     for &(p, w) in poles {
         if let Some(last) = out
             .iter_mut()
-            .find(|(q, c)| ((*q / *c) - p).norm() <= tol * p.norm())
+            .find(|(q, c, _)| ((*q / *c) - p).norm() <= tol * p.norm())
         {
             last.0 += p * w;
             last.1 += w;
+            last.2.push(p);
             merged += 1;
         } else {
-            out.push((p * w, w));
+            out.push((p * w, w, vec![p]));
         }
     }
-    (out.into_iter().map(|(s, c)| s / c).collect(), merged)
+    let poles = out.iter().map(|(s, c, _)| s / c).collect();
+    let members = out.into_iter().map(|(_, _, m)| m).collect();
+    (poles, members, merged)
 }
 
 /// The eigenvalues of `A` and the sizes of their residues in `C (xi I - A)^-1 B`:

@@ -551,37 +551,62 @@ impl SubspaceInit {
                 // subtracted and the subspace step repeated on the flexible part alone.
                 if cfg.order.is_none() {
                     let t2 = Instant::now();
-                    if let Some(second) = self.flexible_pass(
-                        &prepared,
-                        &model,
-                        r,
-                        ny,
-                        inverse_variance,
-                        &g,
-                        &factors,
-                        &ps,
-                        data,
-                        &weighting,
-                    )? {
-                        if second.cost < cost {
-                            messages.push(format!(
-                                "second pass on the data with the rigid body subtracted: order {} for the flexible part, cost {:.4e} -> {:.4e} (kept)",
-                                second.order, cost, second.cost
-                            ));
-                            ps = second.poles;
-                            model = second.model;
-                            cond_res = second.cond;
-                            cost = second.cost;
-                        } else {
-                            messages.push(format!(
-                                "second pass on the data with the rigid body subtracted: order {}, cost {:.4e} not below {:.4e} (not kept)",
-                                second.order, second.cost, cost
-                            ));
+                    // repeated while it lowers the cost: each pass subtracts the rigid
+                    // body fitted with the previous pass's flexible poles
+                    for pass in 2..2 + FLEXIBLE_PASSES {
+                        let Some(next) = self.flexible_pass(
+                            &prepared,
+                            &model,
+                            r,
+                            ny,
+                            inverse_variance,
+                            &g,
+                            &factors,
+                            &ps,
+                            data,
+                            &weighting,
+                        )?
+                        else {
+                            break;
+                        };
+                        let kept = next.cost < cost;
+                        messages.push(format!(
+                            "pass {pass} on the data with the rigid body subtracted: order {} for the flexible part, cost {:.4e} -> {:.4e} ({})",
+                            next.order,
+                            cost,
+                            next.cost,
+                            if kept { "kept" } else { "not kept" }
+                        ));
+                        if !kept {
+                            break;
+                        }
+                        let gain = 1.0 - next.cost / cost;
+                        ps = next.poles;
+                        model = next.model;
+                        cond_res = next.cond;
+                        cost = next.cost;
+                        if gain < 0.01 {
+                            break;
                         }
                     }
                     timings.push(("flexible pass".to_string(), t2.elapsed().as_secs_f64()));
                 }
             }
+        }
+        // the merged poles, decided with the final rigid-body part
+        let (m2, c2, cost2) = self.choose_merged(
+            &prepared,
+            &g,
+            &factors,
+            &mut ps,
+            data,
+            &weighting,
+            &mut messages,
+        )?;
+        if let Some(m2) = m2 {
+            model = m2;
+            cond_res = c2;
+            cost = cost2;
         }
         timings.push(("residues".to_string(), t.elapsed().as_secs_f64()));
         timings.push(("total".to_string(), t0.elapsed().as_secs_f64()));
@@ -664,6 +689,9 @@ impl SubspaceInit {
     }
 }
 
+/// Most passes on the flexible part after the first (see `SubspaceInit::identify`).
+const FLEXIBLE_PASSES: usize = 3;
+
 /// Relative cost (to the weighted energy of the data) at or below which the F-test
 /// sweep takes a fit as exact (a relative rms error of 1e-8) and stops: beyond it the
 /// residual is roundoff, not noise.
@@ -719,6 +747,75 @@ struct FlexiblePass {
 }
 
 impl SubspaceInit {
+    /// For every pole pair merged from several eigenvalues (a residue of rank > 1 whose
+    /// repeated pole noise split), the pole among the merged eigenvalues, their
+    /// residue-weighted mean and their plain mean that gives the lowest cost of the
+    /// residue refit (one group after the other). Near-repeated eigenvalues have nearly
+    /// parallel eigenvectors, so their residue weights are unreliable, and the
+    /// eigenvalue of the weak direction of the residue can be far off: the refit decides.
+    /// Returns the new model, its condition number and cost when a candidate other than
+    /// the weighted mean won.
+    #[allow(clippy::too_many_arguments)]
+    fn choose_merged<D: FrfDataset + ?Sized>(
+        &self,
+        prepared: &crate::prepare::Prepared,
+        g: &[C64],
+        factors: &KnownFactors,
+        ps: &mut PoleSet,
+        data: &D,
+        weighting: &Weighting,
+        messages: &mut Vec<String>,
+    ) -> Result<(Option<FrfModel>, f64, f64), SubspaceError> {
+        let (ny, nu) = (prepared.ny, prepared.nu);
+        let mut best: Option<(FrfModel, f64, f64)> = None;
+        for q in 0..ps.pairs.len() {
+            let members = ps.pair_members.get(q).cloned().unwrap_or_default();
+            if members.len() < 2 {
+                continue;
+            }
+            let plain =
+                members.iter().fold(C64::new(0.0, 0.0), |a, &b| a + b) / members.len() as f64;
+            let current = ps.pairs[q];
+            let base_cost = match &best {
+                Some((_, _, c)) => *c,
+                None => {
+                    let (m, _) =
+                        fit_residues(ny, nu, &prepared.omega, g, &prepared.w, ps, factors)?;
+                    weighted_cost(&m, data, weighting)?
+                }
+            };
+            let mut chosen: Option<(C64, FrfModel, f64, f64)> = None;
+            for cand in members.iter().copied().chain(std::iter::once(plain)) {
+                let mut trial = ps.clone();
+                trial.pairs[q] = cand;
+                let (m, cond) =
+                    fit_residues(ny, nu, &prepared.omega, g, &prepared.w, &trial, factors)?;
+                let c = weighted_cost(&m, data, weighting)?;
+                let better = c < chosen.as_ref().map_or(base_cost, |x| x.3);
+                if better {
+                    chosen = Some((cand, m, cond, c));
+                }
+            }
+            if let Some((cand, m, cond, c)) = chosen {
+                messages.push(format!(
+                    "merged pole at {:.4} Hz: {:.6} Hz of its {} eigenvalues (refit cost {:.4e} against {:.4e} with the residue-weighted mean {:.6} Hz)",
+                    current.norm() / std::f64::consts::TAU,
+                    cand.norm() / std::f64::consts::TAU,
+                    members.len(),
+                    c,
+                    base_cost,
+                    current.norm() / std::f64::consts::TAU
+                ));
+                ps.pairs[q] = cand;
+                best = Some((m, cond, c));
+            }
+        }
+        Ok(match best {
+            Some((m, cond, c)) => (Some(m), cond, c),
+            None => (None, 0.0, 0.0),
+        })
+    }
+
     /// The subspace step repeated on the data with the rigid-body part of `model`
     /// subtracted: projection, order from the singular values, (12), (17), poles; the
     /// integrators of `ps` are kept and all residues refitted on the full data.
@@ -776,7 +873,7 @@ impl SubspaceInit {
             cfg.merge_tol,
         );
         poles.integrators = poles.integrators.max(ps.integrators);
-        let (model, cond) = fit_residues(
+        let (mut model, mut cond) = fit_residues(
             model.ny(),
             model.nu(),
             &prepared.omega,
@@ -785,7 +882,16 @@ impl SubspaceInit {
             &poles,
             factors,
         )?;
-        let cost = weighted_cost(&model, data, weighting)?;
+        let mut cost = weighted_cost(&model, data, weighting)?;
+        let mut notes = Vec::new();
+        let (m2, c2, cost2) = self.choose_merged(
+            prepared, g, factors, &mut poles, data, weighting, &mut notes,
+        )?;
+        if let Some(m2) = m2 {
+            model = m2;
+            cond = c2;
+            cost = cost2;
+        }
         Ok(Some(FlexiblePass {
             order: n,
             poles,
