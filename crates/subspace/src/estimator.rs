@@ -690,7 +690,7 @@ impl SubspaceInit {
 }
 
 /// Most passes on the flexible part after the first (see `SubspaceInit::identify`).
-const FLEXIBLE_PASSES: usize = 3;
+const FLEXIBLE_PASSES: usize = 8;
 
 /// Relative cost (to the weighted energy of the data) at or below which the F-test
 /// sweep takes a fit as exact (a relative rms error of 1e-8) and stops: beyond it the

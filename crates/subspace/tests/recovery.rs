@@ -141,15 +141,21 @@ fn the_error_falls_with_the_noise_through_the_hold() {
     error_falls(3, true, true);
 }
 
-/// These systems failed before the merged poles were weighted by their residues and the
-/// rigid-body integrators were F-tested (seed 29: 5.4e-5 -> 7.6e-5 -> 2.7e-5, a weak
-/// rigid body never found and a rank-2 residue's pole moved by the plain mean; seed 21
-/// 5.8e-5 -> 2.4e-5 -> 6.7e-7; seed 17 5.5e-5 -> 2.0e-5 -> 3.7e-7).
+/// These systems failed before the merged poles were chosen by the residue refit and the
+/// rigid-body integrators were F-tested, with passes on the flexible part (seed 29:
+/// 5.4e-5 -> 7.6e-5 -> 2.7e-5, a weak rigid body never found and a rank-2 residue's
+/// pole moved by the plain mean of its split eigenvalues; seed 21 5.8e-5 -> 2.4e-5 ->
+/// 6.7e-7, the plain mean; seed 17 5.5e-5 -> 2.0e-5 -> 3.7e-7, one state of a double
+/// integrator; seeds 95102 and 72253 (random, through the hold) 6.0e-5 -> 3.4e-5 ->
+/// 3.9e-6 and 3.6e-5 -> 1.2e-5 -> 5.7e-6, the rigid body subtracted once was not
+/// enough).
 #[test]
 fn the_error_falls_with_the_noise_on_more_systems() {
     error_falls(29, true, true);
     error_falls(21, false, false);
     error_falls(17, false, true);
+    error_falls(95102, true, true);
+    error_falls(72253, true, true);
 }
 
 fn cases(default: u32) -> u32 {
@@ -166,7 +172,7 @@ proptest! {
     /// noise from 1e-3 to 1e-5 (the estimate is consistent, so the error is
     /// proportional to the noise once the structure is found).
     #[test]
-    #[ignore = "fails on some systems through the hold: seed 59664 (hold, no rigid body) 2.7e-4 -> 1.1e-5 -> 3.8e-6, seed 95102 (3 x 2, hold, rigid) median error 6.0e-5 -> 3.4e-5 -> 3.9e-6 and seed 71327 (hold, rigid) 6.1e-5 -> 5.8e-6 -> 1.4e-6 for noise 1e-3 -> 1e-4 -> 1e-5 (on 95102 the lowest mode has a rank-2 residue whose pole noise splits; the merged pole stays 6e-5 relative off, and the residue refit cannot move a pole); 21 other random cases passed before the first failure; run with --ignored"]
+    #[ignore = "fails on seed 59664 (2 x 2 through the hold, no rigid body): median error 2.7e-4 -> 1.0e-5 -> 2.1e-6 for noise 1e-3 -> 1e-4 -> 1e-5; at 1e-5 the subspace poles of its lowest mode (40 Hz, rank-2 residue, split by the noise) stay 2.4e-5 relative off and the residue refit ends at 13 to 26 times the noise cost: the subspace estimate is not efficient there, a pole refinement (riv/ml in the chain) is; 100 random cases passed otherwise (run with PROPTEST_CASES=100 --ignored)"]
     fn the_error_falls_with_the_noise(seed in 0u64..100_000, hold in any::<bool>(), rigid in any::<bool>()) {
         let [e3, e4, e5] = errors(seed, hold, rigid);
         prop_assert!(e3 / e4 >= 5.0 && e4 / e5 >= 5.0, "seed {seed} hold {hold} rigid {rigid}: {e3:.3e} -> {e4:.3e} -> {e5:.3e}");
