@@ -261,6 +261,20 @@ fn bad_settings_are_named() {
             },
             "hold sample rate",
         ),
+        (
+            SubspaceConfig {
+                order_alpha: 0.7,
+                ..config(&truth)
+            },
+            "order_alpha",
+        ),
+        (
+            SubspaceConfig {
+                order_min_f: f64::NAN,
+                ..config(&truth)
+            },
+            "order_min_f",
+        ),
     ] {
         let e = SubspaceInit::new(cfg).identify(&d).unwrap_err().to_string();
         assert!(e.contains(says), "{e}");
