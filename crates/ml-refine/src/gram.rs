@@ -89,9 +89,56 @@ fn scaled_cholesky(
 /// matrix; `None` when a scaled pivot of the first `cols - 1` columns is below
 /// `min_pivot` (a zero column is allowed: its row of `R` is zero).
 pub(crate) fn gram_r(a: &[f64], rows: usize, cols: usize, min_pivot: f64) -> Option<Vec<f64>> {
-    let g = gram(a, rows, cols);
+    r_of_gram(&gram(a, rows, cols), min_pivot)
+}
+
+/// [`gram_r`] of the row-major `rows x cols` matrix `a` whose first `k` and last
+/// columns `B = [A | y]` have the known Gram matrix `gb` (`(k + 1)^2`, column-major):
+/// only the products with the middle columns `J` are formed (`J^T a`).
+pub(crate) fn gram_r_with(
+    a: &[f64],
+    rows: usize,
+    cols: usize,
+    k: usize,
+    gb: &[f64],
+    min_pivot: f64,
+) -> Option<Vec<f64>> {
+    let nj = cols - k - 1;
+    debug_assert_eq!(gb.len(), (k + 1) * (k + 1));
+    let am = MatRef::from_row_major_slice(a, rows, cols);
+    let jm = am.subcols(k, nj);
+    let mut x = Mat::<f64>::zeros(nj, cols);
+    matmul(
+        x.as_mut(),
+        Accum::Replace,
+        jm.transpose(),
+        am,
+        1.0,
+        Par::Seq,
+    );
+    // the index of column `i` of `a` in `B`, if it is there
+    let in_b = |i: usize| {
+        if i < k {
+            Some(i)
+        } else if i == cols - 1 {
+            Some(k)
+        } else {
+            None
+        }
+    };
+    let g = Mat::<f64>::from_fn(cols, cols, |i, j| match (in_b(i), in_b(j)) {
+        (Some(p), Some(q)) => gb[q * (k + 1) + p],
+        (None, _) => x[(i - k, j)],
+        (_, None) => x[(j - k, i)],
+    });
+    r_of_gram(&g, min_pivot)
+}
+
+/// The `R` of [`gram_r`] from the Gram matrix `g`.
+fn r_of_gram(g: &Mat<f64>, min_pivot: f64) -> Option<Vec<f64>> {
+    let cols = g.nrows();
     let d: Vec<f64> = (0..cols).map(|j| g[(j, j)].max(0.0).sqrt()).collect();
-    let l = scaled_cholesky(&g, &d, cols, cols.saturating_sub(1), min_pivot, true)?;
+    let l = scaled_cholesky(g, &d, cols, cols.saturating_sub(1), min_pivot, true)?;
     // R = L^T D: row i, column j (j >= i) is L[j, i] d[j]
     let mut r = vec![0.0; cols * cols];
     for j in 0..cols {
@@ -125,14 +172,15 @@ fn cholesky_solve(l: &[f64], k: usize, b: &mut [f64]) {
 /// semi-normal equations: the Cholesky factor of the scaled `A^T A`, then one step of
 /// iterative refinement on the residual computed explicitly (as accurate as a QR while
 /// `cond(A D^-1)^2 eps` is small, which the pivot bound ensures). The residual norm is
-/// that of the returned `c`, computed directly. `None` when a scaled pivot is below
-/// `min_pivot` or a column of `A` is zero.
+/// that of the returned `c`, computed directly; the Gram matrix of `[A | y]` (column-major)
+/// is returned too. `None` when a scaled pivot is below `min_pivot` or a column of `A`
+/// is zero.
 pub(crate) fn gram_lstsq(
     a: &[f64],
     rows: usize,
     k: usize,
     min_pivot: f64,
-) -> Option<(Vec<f64>, f64)> {
+) -> Option<(Vec<f64>, f64, Vec<f64>)> {
     let cols = k + 1;
     let g = gram(a, rows, cols);
     let d: Vec<f64> = (0..k).map(|j| g[(j, j)].max(0.0).sqrt()).collect();
@@ -167,7 +215,8 @@ pub(crate) fn gram_lstsq(
             r * r
         })
         .sum();
-    Some((c, rr))
+    let gv: Vec<f64> = (0..cols * cols).map(|i| g[(i % cols, i / cols)]).collect();
+    Some((c, rr, gv))
 }
 
 #[cfg(test)]
@@ -198,7 +247,21 @@ mod tests {
         let (rows, cols) = (300, 6);
         let a = matrix(rows, cols);
         let k = cols - 1;
-        let (c, rr) = gram_lstsq(&row_major(&a, rows, cols), rows, k, 1e-4).unwrap();
+        let (c, rr, gb) = gram_lstsq(&row_major(&a, rows, cols), rows, k, 1e-4).unwrap();
+        // with a middle column added, the factor from the known Gram matrix of the
+        // others equals the one from the whole
+        let extra: Vec<f64> = (0..rows).map(|i| (i as f64 * 0.05).cos()).collect();
+        let mut b = a[..k * rows].to_vec();
+        b.extend_from_slice(&extra);
+        b.extend_from_slice(&a[k * rows..]);
+        let bm = row_major(&b, rows, cols + 1);
+        let (r1, r2) = (
+            gram_r(&bm, rows, cols + 1, 1e-4).unwrap(),
+            gram_r_with(&bm, rows, cols + 1, k, &gb, 1e-4).unwrap(),
+        );
+        for (u, v) in r1.iter().zip(&r2) {
+            assert!((u - v).abs() <= 1e-12 * u.abs().max(1.0), "{u} vs {v}");
+        }
         let mut q = a.clone();
         householder_r(&mut q, rows, cols);
         let mut x: Vec<f64> = (0..k).map(|i| q[k * rows + i]).collect();

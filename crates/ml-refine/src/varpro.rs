@@ -19,8 +19,8 @@
 //! marginal covariance of the nonlinear parameters (McKelvey eq. (31)-(32) with the
 //! measured variance as the fixed noise model).
 
-use crate::basis::{first_order, powers, rigid_bases, zoh_ts};
-use crate::gram::{gram_lstsq, gram_r};
+use crate::basis::{first_order, first_order_pair, powers, rigid_bases, zoh_ts};
+use crate::gram::{gram_lstsq, gram_r, gram_r_with};
 use crate::qr::{back_substitute, householder_r};
 use crate::C64;
 use rayon::prelude::*;
@@ -157,6 +157,9 @@ pub(crate) struct Eval {
     pub coef: Vec<f64>,
     /// The cost of each entry.
     pub entry_cost: Vec<f64>,
+    /// Per entry, the Gram matrix of `[A_e | y_e]` when the evaluation went through it
+    /// (the Jacobian at the same point reuses it).
+    pub gram: Vec<Option<Vec<f64>>>,
 }
 
 /// A linear problem without a unique solution (a basis column of entry `entry` is in
@@ -215,25 +218,29 @@ impl Problem {
         f
     }
 
-    fn lines(&self, theta: &[f64]) -> Lines {
+    /// `F phi`, `F d phi / d (Re p, Im p)` and `F d phi / d p` (see [`Lines`]) for the
+    /// lines `range`.
+    fn line_terms(
+        &self,
+        theta: &[f64],
+        f: &realize::KnownFactors,
+        range: std::ops::Range<usize>,
+    ) -> (Vec<C64>, Vec<C64>, Vec<C64>) {
         let lay = &self.lay;
-        let (n, n_lc, cpp, np) = (self.n_lines(), lay.n_lc(), lay.cpp(), lay.n_pairs);
-        let f = self.factors(theta);
-        let nd = f.dynamics.len();
+        let (n_lc, cpp, np) = (lay.n_lc(), lay.cpp(), lay.n_pairs);
+        let n = range.len();
         let mut fphi = vec![C64::new(0.0, 0.0); n * n_lc];
         let mut dpair = vec![C64::new(0.0, 0.0); n * np * 2 * cpp];
         let mut dreal = vec![C64::new(0.0, 0.0); n * lay.n_real];
-        let mut dynv = Vec::with_capacity(n * nd);
-        let mut dynx: Vec<Vec<C64>> = vec![Vec::new(); nd];
         let j = C64::new(0.0, 1.0);
-        for (k, &w) in self.omega.iter().enumerate() {
+        for (k, kk) in range.enumerate() {
+            let w = self.omega[kk];
             let fs = f.scalar_at(w);
             let row = &mut fphi[k * n_lc..(k + 1) * n_lc];
             let mut col = 0;
             for q in 0..np {
                 let p = C64::new(theta[2 * q], theta[2 * q + 1]);
-                let (h, dh) = first_order(p, w, self.ts);
-                let (hc, dhc) = first_order(p.conj(), w, self.ts);
+                let [(h, dh), (hc, dhc)] = first_order_pair(p, w, self.ts);
                 let base = (k * np + q) * 2 * cpp;
                 if lay.const_num {
                     let b = p.im;
@@ -260,12 +267,37 @@ impl Problem {
                 col += 1;
             }
             for l in 0..lay.n_rigid {
-                row[col] = fs * self.rigid[k * lay.n_rigid + l];
+                row[col] = fs * self.rigid[kk * lay.n_rigid + l];
                 col += 1;
             }
             if lay.feedthrough {
                 row[col] = fs;
             }
+        }
+        (fphi, dpair, dreal)
+    }
+
+    fn lines(&self, theta: &[f64]) -> Lines {
+        let n = self.n_lines();
+        let f = self.factors(theta);
+        let nd = f.dynamics.len();
+        // the lines in chunks on the rayon pool
+        let chunk = n.div_ceil(8).max(64);
+        let parts: Vec<_> = (0..n.div_ceil(chunk))
+            .into_par_iter()
+            .map(|c| self.line_terms(theta, &f, c * chunk..((c + 1) * chunk).min(n)))
+            .collect();
+        let mut fphi = Vec::new();
+        let mut dpair = Vec::new();
+        let mut dreal = Vec::new();
+        for (a, b, c) in parts {
+            fphi.extend(a);
+            dpair.extend(b);
+            dreal.extend(c);
+        }
+        let mut dynv = Vec::with_capacity(n * nd);
+        let mut dynx: Vec<Vec<C64>> = vec![Vec::new(); nd];
+        for &w in &self.omega {
             for (di, d) in f.dynamics.iter().enumerate() {
                 dynv.push((d.at(w), d.den_at(w)));
                 let x = C64::new(0.0, w / d.scale);
@@ -328,17 +360,20 @@ impl Problem {
         let lay = &self.lay;
         let (m, n_lin) = (lay.m(), lay.n_lin());
         let rows = 2 * self.n_lines();
-        let per: Vec<Result<(f64, Vec<f64>), Singular>> = (0..m)
+        let cols = n_lin + 1;
+        type PerEntry = Result<(f64, Vec<f64>, Option<Vec<f64>>), Singular>;
+        let per: Vec<PerEntry> = (0..m)
             .into_par_iter()
-            .map(|e| {
-                let cols = n_lin + 1;
-                let mut a = vec![0.0; rows * cols];
-                self.fill_basis(&lines, e, &mut a, cols, n_lin);
-                if let Some((c, rr)) = gram_lstsq(&a, rows, n_lin, GRAM_MIN_PIVOT) {
-                    return Ok((0.5 * rr, c));
+            .map_init(Vec::new, |buf: &mut Vec<f64>, e| {
+                // every element is written: a reused buffer needs no clearing
+                buf.resize(rows * cols, 0.0);
+                let a = &mut buf[..];
+                self.fill_basis(&lines, e, a, cols, n_lin);
+                if let Some((c, rr, g)) = gram_lstsq(a, rows, n_lin, GRAM_MIN_PIVOT) {
+                    return Ok((0.5 * rr, c, Some(g)));
                 }
                 // nearly dependent columns: the QR, which also names a singular one
-                let mut a = col_major(&a, rows, cols);
+                let mut a = col_major(a, rows, cols);
                 let norms: Vec<f64> = (0..n_lin)
                     .map(|l| {
                         a[l * rows..(l + 1) * rows]
@@ -363,22 +398,25 @@ impl Problem {
                 let mut c: Vec<f64> = (0..n_lin).map(|i| a[n_lin * rows + i]).collect();
                 back_substitute(&a, rows, 0, n_lin, &mut c);
                 let rr = a[n_lin * rows + n_lin];
-                Ok((0.5 * rr * rr, c))
+                Ok((0.5 * rr * rr, c, None))
             })
             .collect();
         let mut cost = 0.0;
         let mut coef = Vec::with_capacity(m * n_lin);
         let mut entry_cost = Vec::with_capacity(m);
+        let mut gram = Vec::with_capacity(m);
         for r in per {
-            let (c2, c) = r?;
+            let (c2, c, g) = r?;
             cost += c2;
             entry_cost.push(c2);
             coef.extend(c);
+            gram.push(g);
         }
         Ok(Eval {
             cost,
             coef,
             entry_cost,
+            gram,
         })
     }
 
@@ -395,13 +433,15 @@ impl Problem {
         let rows = 2 * n;
         let nb = n_nl + 1;
         let f = self.factors(theta);
+        let cols = n_lin + n_nl + 1;
         let blocks: Vec<(Vec<f64>, Vec<f64>)> = (0..m)
             .into_par_iter()
-            .map(|e| {
-                let cols = n_lin + n_nl + 1;
-                let mut a = vec![0.0; rows * cols];
+            .map_init(Vec::new, |buf: &mut Vec<f64>, e| {
+                // every element is written: a reused buffer needs no clearing
+                buf.resize(rows * cols, 0.0);
+                let a = &mut buf[..];
                 let ycol = n_lin + n_nl;
-                self.fill_basis(&lines, e, &mut a, cols, ycol);
+                self.fill_basis(&lines, e, a, cols, ycol);
                 let c = &ev.coef[e * n_lin..(e + 1) * n_lin];
                 let (i_out, j_in) = (e % lay.ny, e / lay.ny);
                 for k in 0..n {
@@ -451,6 +491,10 @@ impl Problem {
                                 for ci in 0..nnum {
                                     put(col + nden + ci, rest * xs[ci] / ad);
                                 }
+                            } else {
+                                for ci in 0..nden + nnum {
+                                    put(col + ci, C64::new(0.0, 0.0));
+                                }
                             }
                             col += nden + nnum;
                         }
@@ -468,7 +512,10 @@ impl Problem {
                 // matrix while that is accurate (see `crate::gram`), by QR otherwise
                 let mut b = vec![0.0; nb * nb];
                 let gram = (2.0 * ev.entry_cost[e] > GRAM_MIN_RESIDUAL * GRAM_MIN_RESIDUAL * y2)
-                    .then(|| gram_r(&a, rows, cols, GRAM_MIN_PIVOT))
+                    .then(|| match &ev.gram[e] {
+                        Some(gb) => gram_r_with(a, rows, cols, n_lin, gb, GRAM_MIN_PIVOT),
+                        None => gram_r(a, rows, cols, GRAM_MIN_PIVOT),
+                    })
                     .flatten();
                 if let Some(g) = gram {
                     for cj in 0..nb {
@@ -477,7 +524,7 @@ impl Problem {
                         }
                     }
                 } else {
-                    let mut a = col_major(&a, rows, cols);
+                    let mut a = col_major(a, rows, cols);
                     householder_r(&mut a, rows, cols);
                     for cj in 0..nb {
                         for ri in 0..=cj.min(rows.saturating_sub(n_lin + 1)) {
