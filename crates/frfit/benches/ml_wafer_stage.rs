@@ -38,7 +38,10 @@ fn load_band() -> Option<Frf> {
     let data = match frf_data::io::read_frf(&path) {
         Ok(d) => d,
         Err(e) => {
-            println!("ml_wafer_stage skipped: cannot read {}: {e}", path.display());
+            println!(
+                "ml_wafer_stage skipped: cannot read {}: {e}",
+                path.display()
+            );
             return None;
         }
     };
