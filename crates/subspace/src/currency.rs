@@ -243,6 +243,43 @@ fn unit_model(ps: &PoleSet, term: Term) -> ModalModel {
     m
 }
 
+/// The linear terms of the residue fit of `ps`, in the order of [`residue_basis`].
+fn terms_of(ps: &PoleSet) -> Vec<Term> {
+    let mut terms = Vec::new();
+    for q in 0..ps.pairs.len() {
+        terms.push(Term::PairRe(q));
+        terms.push(Term::PairIm(q));
+    }
+    terms.extend((0..ps.reals.len()).map(Term::Real));
+    terms.extend((0..ps.integrators).map(Term::Rigid));
+    terms.push(Term::Feedthrough);
+    terms
+}
+
+/// The basis of the residue fit of [`fit_residues`]: the currency's own response
+/// (with `factors`) at `omega` of each unit term (the real and the imaginary part of
+/// the residue of every pair, every real pole, every integrator, the feedthrough).
+pub fn residue_basis(
+    ps: &PoleSet,
+    factors: &KnownFactors,
+    omega: &[f64],
+) -> Result<Vec<Vec<C64>>, SubspaceError> {
+    let terms = terms_of(ps);
+    let mut basis = Vec::with_capacity(terms.len());
+    for &t in &terms {
+        let fm = FrfModel {
+            modal: unit_model(ps, t),
+            factors: KnownFactors {
+                dynamics: Vec::new(),
+                crosstalk: None,
+                ..factors.clone()
+            },
+        };
+        basis.push(fm.freq_response(omega)?.values);
+    }
+    Ok(basis)
+}
+
 /// Fits the residues, rigid-body coefficients and feedthrough of the poles `ps` to the
 /// data `g` (line after line, each `vec(G)`) at `omega` with weights `w` (same layout),
 /// through the currency's response with `factors`. Returns the model and the worst
@@ -256,14 +293,7 @@ pub fn fit_residues(
     ps: &PoleSet,
     factors: &KnownFactors,
 ) -> Result<(FrfModel, f64), SubspaceError> {
-    let mut terms = Vec::new();
-    for q in 0..ps.pairs.len() {
-        terms.push(Term::PairRe(q));
-        terms.push(Term::PairIm(q));
-    }
-    terms.extend((0..ps.reals.len()).map(Term::Real));
-    terms.extend((0..ps.integrators).map(Term::Rigid));
-    terms.push(Term::Feedthrough);
+    let terms = terms_of(ps);
     let (nl, nb, m) = (omega.len(), terms.len(), ny * nu);
     if 2 * nl < nb {
         return Err(SubspaceError::TooFewLines {
@@ -274,19 +304,7 @@ pub fn fit_residues(
             needed: nb.div_ceil(2),
         });
     }
-    // basis columns: the currency's own response of each unit term (1 x 1)
-    let mut basis = Vec::with_capacity(nb);
-    for &t in &terms {
-        let fm = FrfModel {
-            modal: unit_model(ps, t),
-            factors: KnownFactors {
-                dynamics: Vec::new(),
-                crosstalk: None,
-                ..factors.clone()
-            },
-        };
-        basis.push(fm.freq_response(omega)?.values);
-    }
+    let basis = residue_basis(ps, factors, omega)?;
     let mut modal = ModalModel::new(ny, nu);
     modal.pairs = ps
         .pairs

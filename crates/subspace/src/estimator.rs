@@ -2,6 +2,9 @@
 //! estimator chain (`--init subspace`).
 
 use crate::currency::{classify, eigen_weights, fit_residues, PoleSet, ReflectedPole};
+use crate::delay_refine::{
+    self, huber, line_residuals, DelayCost, DelayPass, DelayRefinement, RotatedCost,
+};
 use crate::order::{
     f_critical, f_statistic, f_sweep, largest_gap, numerical_rank, OrderRule, OrderScore,
     SweepSettings, RANK_TOL,
@@ -31,6 +34,24 @@ pub struct SubspaceConfig {
     pub delay: DelayChoice,
     /// Delay estimator settings. Default: [`DelayConfig::default`].
     pub delay_config: DelayConfig,
+    /// Refine a free delay (`Auto` or `Start`) inside the initialiser (see
+    /// [`crate::delay_refine`]): with the subspace poles fixed the residue refit is
+    /// linear, its cost a function of the delay alone, minimised around the start;
+    /// when the delay moved by more than `delay_tol_rad`, the subspace step is repeated
+    /// with the refined delay divided out. The model of the lowest cost is kept.
+    /// Default: true.
+    pub refine_delay: bool,
+    /// Most subspace steps of the delay refinement (the first included). Default: 3.
+    pub delay_passes: usize,
+    /// Half-width of the delay search bracket around each pass's start, seconds;
+    /// `None`: a tenth of the period of the highest line (a phase of +-0.63 rad there;
+    /// 50 us for a band ending at 2 kHz). Default: `None`.
+    pub delay_half_width: Option<f64>,
+    /// Points of the scan of the bracket before the slope's zero is found. Default: 21.
+    pub delay_grid: usize,
+    /// The subspace step is repeated when the delay moved by more than this phase at
+    /// the highest line, rad. Default: 1e-4.
+    pub delay_tol_rad: f64,
     /// `k` of `(j w)^k`: 0 displacement (default), 1 velocity, 2 accelerance data.
     pub derivative_order: u32,
     /// Weighting: [`Weighting::Uniform`] runs the unweighted algorithm; any other
@@ -97,6 +118,11 @@ impl Default for SubspaceConfig {
             hold: Hold::None,
             delay: DelayChoice::Auto,
             delay_config: DelayConfig::default(),
+            refine_delay: true,
+            delay_passes: 3,
+            delay_half_width: None,
+            delay_grid: 21,
+            delay_tol_rad: 1e-4,
             derivative_order: 0,
             weighting: Weighting::Auto,
             order: None,
@@ -167,8 +193,13 @@ pub struct SubspaceReport {
     pub real_poles: usize,
     /// The delay estimate, when the delay was estimated.
     pub delay_estimate: Option<DelayEstimate>,
-    /// The delay divided out, seconds (beyond the hold).
+    /// The delay divided out before the subspace step of the state space returned,
+    /// seconds (beyond the hold). The model's own delay (`factors.delay_s`) is the
+    /// refined one when the delay was refined.
     pub delay_s: f64,
+    /// The delay refinement (see [`crate::delay_refine`]), when it ran.
+    #[serde(default)]
+    pub delay_refinement: Option<DelayRefinement>,
     /// Weighted cost of the state space of (17) on the data.
     pub state_space_cost: f64,
     /// Weighted cost of the currency model (residues refitted) on the data.
@@ -249,6 +280,22 @@ impl SubspaceInit {
                 "must be finite and >= 0",
             ));
         }
+        if let Some(h) = c.delay_half_width {
+            if !(h.is_finite() && h > 0.0) {
+                return Err(SubspaceError::invalid(
+                    "delay_half_width (s)",
+                    h,
+                    "must be finite and > 0",
+                ));
+            }
+        }
+        if !(c.delay_tol_rad.is_finite() && c.delay_tol_rad >= 0.0) {
+            return Err(SubspaceError::invalid(
+                "delay_tol_rad",
+                c.delay_tol_rad,
+                "must be finite and >= 0",
+            ));
+        }
         if c.order.is_none() && c.max_order == 0 {
             return Err(SubspaceError::invalid("max_order", 0, "must be >= 1"));
         }
@@ -269,7 +316,7 @@ impl SubspaceInit {
         let t0 = Instant::now();
         let mut timings = Vec::new();
         let mut messages = Vec::new();
-        let (ny, nu, nl) = (data.ny(), data.nu(), data.n_lines());
+        let nl = data.n_lines();
         let band = if nl > 0 {
             (data.freq_hz(0), data.freq_hz(nl - 1))
         } else {
@@ -303,7 +350,7 @@ impl SubspaceInit {
                 timings.push(("delay".to_string(), t.elapsed().as_secs_f64()));
                 let tau = est.tau_s - hold_share;
                 messages.push(format!(
-                    "delay estimate {:.2} us (coherence {:.2}), {:.2} us divided out beyond the hold; a refiner refines it",
+                    "delay estimate {:.2} us (coherence {:.2}), {:.2} us divided out beyond the hold",
                     est.tau_s * 1e6,
                     est.coherence,
                     tau * 1e6
@@ -319,6 +366,188 @@ impl SubspaceInit {
                 "must be finite",
             ));
         }
+        let first = self.subspace_step(
+            data,
+            delay_s,
+            fitted,
+            delay_estimate,
+            messages.clone(),
+            timings,
+        )?;
+        self.refine_delay(data, first, delay_s, fitted, &messages, t0)
+    }
+
+    /// The delay refinement of a free delay (`Auto`, `Start`; see
+    /// [`crate::delay_refine`]): with the poles of the subspace step fixed, the delay
+    /// minimising the residue-refit cost in a bracket around the delay divided out;
+    /// when it moved by more than `delay_tol_rad` at the highest line, the subspace step
+    /// again with the refined delay divided out, and the delay refined with its poles;
+    /// at most `delay_passes` subspace steps. The pass of the lowest cost is returned,
+    /// its model with the refined delay (still a free parameter, `delay_fitted`, for a
+    /// refiner). Without a free delay, or with `refine_delay` off, `first` as it is.
+    fn refine_delay<D: FrfDataset + ?Sized>(
+        &self,
+        data: &D,
+        first: (Identified, PoleSet),
+        start: f64,
+        fitted: bool,
+        pre: &[String],
+        t0: Instant,
+    ) -> Result<Identified, SubspaceError> {
+        let cfg = &self.config;
+        let (mut cur, mut poles) = first;
+        if !(fitted && cfg.refine_delay && cfg.delay_passes > 0) {
+            cur.timings
+                .push(("total".to_string(), t0.elapsed().as_secs_f64()));
+            return Ok(cur);
+        }
+        let omega = data.omegas();
+        let g = data.values_vec();
+        let w = cfg.weighting.resolve(data).weights(data)?;
+        let w_max = omega.iter().copied().fold(0.0, f64::max);
+        let half_width = cfg
+            .delay_half_width
+            .unwrap_or(0.1 * std::f64::consts::TAU / w_max);
+        let tol = cfg.delay_tol_rad / w_max;
+        let mut passes: Vec<DelayPass> = Vec::new();
+        let mut notes = Vec::new();
+        let mut extra_timings = Vec::new();
+        let mut search_s = 0.0;
+        let mut best: Option<(Identified, usize, f64)> = None;
+        let mut tau_div = start;
+        let mut threshold = None;
+        for pass in 1..=cfg.delay_passes {
+            let ts = Instant::now();
+            let dc = DelayCost {
+                ny: data.ny(),
+                nu: data.nu(),
+                omega: &omega,
+                g: &g,
+                w: &w,
+                poles: &poles,
+                factors: &cur.model.factors,
+            };
+            let (rw, med_start) =
+                delay_refine::robust_weights(&cur.model, &omega, &g, &w, ROBUST_LINE_C)?;
+            // the threshold of the robust cost that compares the passes: fixed by the first
+            let thr = *threshold.get_or_insert(ROBUST_LINE_C * med_start);
+            let robust_start = huber(&line_residuals(&cur.model, &omega, &g, &w)?, thr);
+            let fast = RotatedCost::new(&dc, rw)?;
+            let min = delay_refine::minimise(|t| fast.at(t), tau_div, half_width, cfg.delay_grid);
+            let exact = dc.at(min.tau)?;
+            let robust_refined = huber(&line_residuals(&exact.model, &omega, &g, &w)?, thr);
+            search_s += ts.elapsed().as_secs_f64();
+            let rec = DelayPass {
+                divided_out_s: tau_div,
+                subspace_cost: cur.report.cost,
+                subspace_robust_cost: robust_start,
+                refined_s: min.tau,
+                refined_cost: exact.cost,
+                refined_robust_cost: robust_refined,
+                evaluations: min.evaluations,
+                at_edge: min.at_edge,
+            };
+            notes.push(format!(
+                "delay pass {pass}: {:.4} us divided out, cost {:.4e} (robust {:.4e}); with its poles fixed the robust residue refit is best at {:.4} us, cost {:.4e} (robust {:.4e}; {} evaluations{})",
+                rec.divided_out_s * 1e6,
+                rec.subspace_cost,
+                rec.subspace_robust_cost,
+                rec.refined_s * 1e6,
+                rec.refined_cost,
+                rec.refined_robust_cost,
+                rec.evaluations,
+                if rec.at_edge {
+                    format!(", at the edge of the bracket +-{:.3} us", half_width * 1e6)
+                } else {
+                    String::new()
+                }
+            ));
+            passes.push(rec);
+            let mut score = robust_start;
+            if robust_refined <= robust_start {
+                cur.model = exact.model;
+                cur.report.cost = exact.cost;
+                cur.report.conditioning.residues = exact.cond;
+                score = robust_refined;
+            }
+            let refined = cur.model.factors.delay_s;
+            if best.as_ref().is_none_or(|(_, _, b)| score < *b) {
+                best = Some((cur.clone(), pass, score));
+            }
+            if (refined - tau_div).abs() <= tol || pass == cfg.delay_passes {
+                break;
+            }
+            tau_div = refined;
+            let ts = Instant::now();
+            match self.subspace_step(
+                data,
+                tau_div,
+                true,
+                cur.report.delay_estimate.clone(),
+                pre.to_vec(),
+                Vec::new(),
+            ) {
+                Ok((next, p)) => {
+                    cur = next;
+                    poles = p;
+                    extra_timings.push((
+                        format!("subspace step, delay pass {}", pass + 1),
+                        ts.elapsed().as_secs_f64(),
+                    ));
+                }
+                Err(e) => {
+                    notes.push(format!(
+                        "delay pass {}: the subspace step with {:.4} us divided out failed ({e}); the earlier passes stand",
+                        pass + 1,
+                        tau_div * 1e6
+                    ));
+                    break;
+                }
+            }
+        }
+        let Some((mut out, chosen, _)) = best else {
+            unreachable!("the first delay pass always runs")
+        };
+        let refinement = DelayRefinement {
+            start_s: start,
+            refined_s: out.model.factors.delay_s,
+            half_width_s: half_width,
+            passes,
+            chosen_pass: chosen,
+        };
+        out.messages.extend(notes);
+        out.messages.push(format!(
+            "delay refined with the subspace poles fixed: {:.4} us -> {:.4} us beyond the hold (pass {chosen} of {} kept, {:.4} us divided out for its state space); it stays a free parameter for a refiner",
+            refinement.start_s * 1e6,
+            refinement.refined_s * 1e6,
+            refinement.passes.len(),
+            out.report.delay_s * 1e6
+        ));
+        out.report.delay_refinement = Some(refinement);
+        out.timings.extend(extra_timings);
+        out.timings.push(("delay refinement".to_string(), search_s));
+        out.timings
+            .push(("total".to_string(), t0.elapsed().as_secs_f64()));
+        Ok(out)
+    }
+
+    /// The subspace step with the delay `delay_s` (beyond the hold) divided out: the
+    /// projection, the order, (12), (17), the poles and the residue refit of the
+    /// currency. Returns the result and its poles.
+    fn subspace_step<D: FrfDataset + ?Sized>(
+        &self,
+        data: &D,
+        delay_s: f64,
+        fitted: bool,
+        delay_estimate: Option<DelayEstimate>,
+        mut messages: Vec<String>,
+        mut timings: Vec<(String, f64)>,
+    ) -> Result<(Identified, PoleSet), SubspaceError> {
+        let cfg = &self.config;
+        let t0 = Instant::now();
+        let (ny, nu, nl) = (data.ny(), data.nu(), data.n_lines());
+        let band = (data.freq_hz(0), data.freq_hz(nl - 1));
+        let band_txt = format!("{:.4}..{:.4} Hz", band.0, band.1);
         let factors = KnownFactors {
             delay_s,
             delay_fitted: fitted,
@@ -609,7 +838,7 @@ impl SubspaceInit {
             cost = cost2;
         }
         timings.push(("residues".to_string(), t.elapsed().as_secs_f64()));
-        timings.push(("total".to_string(), t0.elapsed().as_secs_f64()));
+        timings.push(("subspace step".to_string(), t0.elapsed().as_secs_f64()));
         messages.push(format!(
             "order {n} ({order_rule}); {} pole pairs, {} real poles, {} integrators; weighting: {}",
             ps.pairs.len(),
@@ -675,19 +904,26 @@ impl SubspaceInit {
             real_poles: ps.reals.len(),
             delay_estimate,
             delay_s,
+            delay_refinement: None,
             state_space_cost: ss_cost,
             cost,
             band_hz: band,
         };
-        Ok(Identified {
+        let out = Identified {
             state_space,
             model,
             report,
             messages,
             timings,
-        })
+        };
+        Ok((out, ps))
     }
 }
+
+/// Lines whose weighted squared residual exceeds this multiple of the median are
+/// down-weighted in the delay search (see [`delay_refine::robust_weights`]): a 3-sigma
+/// Huber threshold in amplitude.
+const ROBUST_LINE_C: f64 = 9.0;
 
 /// Most passes on the flexible part after the first (see `SubspaceInit::identify`).
 const FLEXIBLE_PASSES: usize = 8;

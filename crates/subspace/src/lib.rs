@@ -24,9 +24,13 @@
 //!    added by an F test and the subspace step is repeated on the data with the fitted
 //!    rigid body subtracted (while the cost falls); a pole merged from eigenvalues that
 //!    noise split (a residue of rank > 1) is the candidate with the lowest refit cost;
-//! 6. [`SubspaceInit`]: all of it behind `frf_data::Estimator` (`Start = ()`).
+//! 6. [`delay_refine`]: a free delay (estimated, or given as a start) refined with the
+//!    subspace poles fixed (the residue refit is linear, its cost a function of the
+//!    delay alone), the subspace step repeated with the refined delay divided out;
+//! 7. [`SubspaceInit`]: all of it behind `frf_data::Estimator` (`Start = ()`).
 
 pub mod currency;
+pub mod delay_refine;
 pub mod error;
 pub mod estimator;
 pub mod order;
@@ -34,6 +38,7 @@ pub mod prepare;
 pub mod projection;
 pub mod realization;
 
+pub use delay_refine::{DelayPass, DelayRefinement};
 pub use error::SubspaceError;
 pub use estimator::{Conditioning, Identified, SubspaceConfig, SubspaceInit, SubspaceReport};
 pub use order::{OrderRule, OrderScore};
