@@ -415,7 +415,10 @@ mod tests {
             let text = format!("freq_hz,experiment,realization,period,{h}\n1,1,1,1,0\n");
             let e = parse_spectra_csv(&text, "t").unwrap_err();
             assert_eq!(e.problem(), Some(FormatProblem::BadHeader), "{e}");
-            assert!(e.to_string().contains(&format!("unknown column `{h}`")), "{e}");
+            assert!(
+                e.to_string().contains(&format!("unknown column `{h}`")),
+                "{e}"
+            );
             assert!(e.to_string().contains("t:1"), "{e}");
         }
         // the fuzzer's input itself, as the reader gets it (lossy UTF-8)
