@@ -20,7 +20,7 @@ use experiment::synth::{
 };
 use frf_data::truth::Truth;
 use frf_data::ModelStructure;
-use frf_data::{Frf, FrfDataset, ProgressSink, C64};
+use frf_data::{FrfDataset, ProgressSink};
 use frfit::additive_riv::{Hold, ModelFile};
 use frfit::pipeline::{self, PipelineConfig, PipelineOutput};
 use frfit::report::write_report;
@@ -298,11 +298,12 @@ pub fn run(args: Args) -> Result<(), Error> {
                 .stage("validation experiment")?;
             let est2 = sim2.run().stage("validation experiment")?;
             let (lo, hi) = (out.band.freq_hz(0), out.band.freq_hz(out.band.n_lines() - 1));
-            let vdata = est2
+            let band = est2
                 .frf
                 .band(lo, hi)
-                .stage("validation experiment band")?
-                .to_frf();
+                .stage("validation experiment band")?;
+            let lines = band.line_range();
+            let vdata = band.to_frf();
             std::fs::create_dir_all(&vdir).stage("validation-experiment directory")?;
             frf_data::io::write_frf_csv(
                 vdir.join(DATA_NAME),
@@ -325,14 +326,18 @@ pub fn run(args: Args) -> Result<(), Error> {
             };
             // the estimator's disturbance covariance C_v of the band's lines: the shape
             // across outputs of each line's disturbance model (Prop. 9, eqs. 16-18)
-            let cv = band_covariance(&est2.frf, est2.disturbance_covariance.as_deref(), lo, hi);
+            let m = vdata.ny() * vdata.ny();
+            let cv = est2
+                .disturbance_covariance
+                .as_deref()
+                .and_then(|c| c.get(lines.start * m..lines.end * m));
             if cv.is_none() {
                 eprintln!(
                     "note: the second experiment gives no disturbance covariance; the \
                      per-entry variances are used"
                 );
             }
-            let v = validate_frf(&grid, &vdata, cv.as_deref(), &vcfg).stage("validation")?;
+            let v = validate_frf(&grid, &vdata, cv, &vcfg).stage("validation")?;
             write_validation_dir(
                 &vdir,
                 "../model.json",
@@ -396,23 +401,6 @@ pub fn run(args: Args) -> Result<(), Error> {
     }
     println!("  {:<16} {:>7.2} s", "total", t_all.elapsed().as_secs_f64());
     Ok(())
-}
-
-/// The disturbance covariance `C_v` (`ny x ny` per line, line after line) of the lines of
-/// `frf` inside `lo..=hi` Hz (the band `Frf::band` cuts), or `None` when there is none.
-fn band_covariance(frf: &Frf, cv: Option<&[C64]>, lo: f64, hi: f64) -> Option<Vec<C64>> {
-    let cv = cv?;
-    let ny = frf.ny();
-    let m = ny * ny;
-    if cv.len() != frf.n_lines() * m {
-        return None;
-    }
-    Some(
-        (0..frf.n_lines())
-            .filter(|&k| (lo..=hi).contains(&frf.freq_hz(k)))
-            .flat_map(|k| cv[k * m..(k + 1) * m].iter().copied())
-            .collect(),
-    )
 }
 
 #[cfg(test)]

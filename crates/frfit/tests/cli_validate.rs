@@ -13,6 +13,22 @@ fn read_json(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// The 2 x 3 plant written into `dir` and fitted (`--delay none`): its CSV and model.
+fn fit_plant(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let csv = write_plant(dir, 0.0);
+    let model = dir.join("model.json");
+    let o = run(&[
+        "fit",
+        csv.to_str().unwrap(),
+        "--delay",
+        "none",
+        "--out",
+        model.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    (csv, model)
+}
 fn validate(
     model: &std::path::Path,
     csv: &std::path::Path,
@@ -35,18 +51,7 @@ fn validate(
 #[test]
 fn validate_a_fitted_model_and_one_with_a_mode_removed() {
     let dir = temp_dir("validate");
-    let csv = write_plant(&dir, 0.0);
-    let model = dir.join("model.json");
-    let o = run(&[
-        "fit",
-        csv.to_str().unwrap(),
-        "--delay",
-        "none",
-        "--out",
-        model.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let (csv, model) = fit_plant(&dir);
 
     let v = validate(&model, &csv, &dir.join("full"));
     assert_eq!(v["alpha"].as_f64(), Some(0.99));
@@ -138,18 +143,7 @@ fn validate_a_fitted_model_and_one_with_a_mode_removed() {
 #[test]
 fn validate_reports_bad_input() {
     let dir = temp_dir("validate-bad");
-    let csv = write_plant(&dir, 0.0);
-    let model = dir.join("model.json");
-    let o = run(&[
-        "fit",
-        csv.to_str().unwrap(),
-        "--delay",
-        "none",
-        "--out",
-        model.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let (csv, model) = fit_plant(&dir);
     let out = dir.join("v");
     let o = run(&[
         "validate",
@@ -230,18 +224,7 @@ fn diagnose_validates_its_final_model() {
 #[test]
 fn validate_reads_the_realizations_from_the_comments() {
     let dir = temp_dir("validate-realizations");
-    let csv = write_plant(&dir, 0.0);
-    let model = dir.join("model.json");
-    let o = run(&[
-        "fit",
-        csv.to_str().unwrap(),
-        "--delay",
-        "none",
-        "--out",
-        model.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let (csv, model) = fit_plant(&dir);
     // a model a little off the data (a 10 us delay it does not have: a phase error of
     // 0.6 % at 100 Hz against a noise of 0.1 %), so that gamma is not zero everywhere
     let mut json = read_json(&model);
