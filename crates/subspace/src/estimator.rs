@@ -9,6 +9,7 @@ use crate::order::{
     f_critical, f_statistic, f_sweep, largest_gap, numerical_rank, OrderRule, OrderScore,
     SweepSettings, RANK_TOL,
 };
+use crate::pole_refine::{refine_poles, PoleRefineSettings};
 use crate::prepare::{prepare, Variable};
 use crate::projection::project;
 use crate::realization::{bilinear_to_continuous, fit_b_d, shift_a_c};
@@ -642,9 +643,29 @@ impl SubspaceInit {
                             cfg.max_integrators,
                             cfg.merge_tol,
                         );
-                        let (model, _) =
-                            fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)
-                                .ok()?;
+                        // the candidate's poles refined (the F test compares minima);
+                        // where the refinement fails numerically, the subspace poles
+                        let poles = refine_poles(
+                            ny,
+                            nu,
+                            &prepared.omega,
+                            &g,
+                            &prepared.w,
+                            &ps,
+                            &factors,
+                            &PoleRefineSettings::default(),
+                        )
+                        .map_or(ps.clone(), |r| r.poles);
+                        let (model, _) = fit_residues(
+                            ny,
+                            nu,
+                            &prepared.omega,
+                            &g,
+                            &prepared.w,
+                            &poles,
+                            &factors,
+                        )
+                        .ok()?;
                         let cost = weighted_cost(&model, data, &weighting).ok()?;
                         Some((cost * 2.0 * nl as f64, currency_params(&ps, ny * nu)))
                     });
@@ -656,7 +677,7 @@ impl SubspaceInit {
                             (
                                 n,
                                 format!(
-                                    "F test on the refitted residues of the poles of (12) with B, D of (17), alpha {:.0e}, orders {}..={} from {sv_rule}{}",
+                                    "F test on the residue refits of the poles of (12) with B, D of (17), poles refined by Gauss-Newton, alpha {:.0e}, orders {}..={} from {sv_rule}{}",
                                     cfg.order_alpha,
                                     settings.range.0,
                                     order_sweep.last().map_or(n, |s| s.order),

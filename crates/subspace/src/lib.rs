@@ -14,7 +14,8 @@
 //!    lines), optional noise-covariance weighting, one SVD;
 //! 3. [`order`]: the order given, from the singular values (noise threshold or largest
 //!    gap; the default), or by an F test on the refitted residues around the
-//!    singular-value proposal ([`OrderRule::FTest`]);
+//!    singular-value proposal ([`OrderRule::FTest`]), each candidate's poles refined
+//!    for that cost first ([`pole_refine`]);
 //! 4. [`realization`]: `A`, `C` from (12), `B`, `D` from (17), the exact map back to
 //!    continuous time;
 //! 5. [`currency`]: exact continuous poles (`s = ln(z)/Ts` or the inverse bilinear map),
@@ -34,6 +35,7 @@ pub mod delay_refine;
 pub mod error;
 pub mod estimator;
 pub mod order;
+pub mod pole_refine;
 pub mod prepare;
 pub mod projection;
 pub mod realization;
