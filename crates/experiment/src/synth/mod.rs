@@ -3,6 +3,8 @@
 //! - [`ModalPlant`]: the additive modal plant (rigid body or suspension, flexible modes
 //!   with rank-one residues `c b^T`, optional feedthrough), its exact sampled response
 //!   and an exact ZOH realisation for time-domain simulation;
+//! - [`RandomModal`]: random modal plants of any size (`frfit simulate random-modal`),
+//!   their exact FRF and a noisy measurement with its variance;
 //! - [`WaferStage`]: the wafer-stage testbed (free plate, 4 sensors, 13 actuators,
 //!   17 modes, 10 kHz, ZOH + one sample of computation delay), seeded;
 //! - [`RigidBodyController`]: a stabilising decoupling controller in rigid-body
@@ -15,6 +17,7 @@
 pub mod controller;
 pub mod experiment;
 pub mod plant;
+pub mod random;
 pub mod signals;
 pub mod wafer;
 
@@ -26,6 +29,7 @@ pub use plant::{
     truth_delay_samples, DiscreteModalPlant, DiscreteModalState, FlexibleMode, ModalPlant,
     ModalPlantBuilder, RigidBody,
 };
+pub use random::{RandomModal, RandomModalConfig};
 pub use signals::NoiseConfig;
 pub use wafer::{beam_function, WaferStage, WaferStageConfig};
 

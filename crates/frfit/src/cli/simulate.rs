@@ -2,13 +2,18 @@
 //! single-axis random-phase odd multisines, `P` periods x `R` realizations) and its
 //! nonparametric FRF estimate, written as an FRF CSV with `_var` columns; optionally the
 //! truth JSON, the exact noiseless response and the per-period spectra.
+//!
+//! `frfit simulate random-modal`: a random modal plant of any size
+//! (`experiment::synth::RandomModal`), its noisy FRF with the variance, the truth and the
+//! exact response.
 
+use super::common::{parse_band, Band};
 use clap::{Args as ClapArgs, Subcommand, ValueEnum};
 use experiment::nonparametric::spectra_csv::write_spectra_csv;
 use experiment::nonparametric::{EstimatorConfig, LineGrid};
 use experiment::synth::{
-    ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
-    WaferStageExperiment,
+    ControllerConfig, ExperimentConfig, NoiseConfig, RandomModal, RandomModalConfig,
+    SimulationPath, WaferStageConfig, WaferStageExperiment,
 };
 use frf_data::FrfDataset;
 use frfit::FrfitError;
@@ -28,6 +33,56 @@ pub struct Args {
 pub enum Target {
     /// The out-of-plane wafer stage (4 sensors x 13 actuators, 17 modes, 10 kHz).
     WaferStage(WaferArgs),
+    /// A random modal plant of any size (rank-one modes, optional rigid body, close
+    /// pairs), its exact FRF and a noisy measurement with its variance.
+    RandomModal(RandomArgs),
+}
+
+/// Arguments of `frfit simulate random-modal`.
+#[derive(ClapArgs, Debug)]
+pub struct RandomArgs {
+    /// Outputs.
+    #[arg(long, default_value_t = 4)]
+    pub ny: usize,
+    /// Inputs.
+    #[arg(long, default_value_t = 4)]
+    pub nu: usize,
+    /// Flexible modes.
+    #[arg(long, default_value_t = 10)]
+    pub modes: usize,
+    /// Frequency lines.
+    #[arg(long, default_value_t = 4000)]
+    pub lines: usize,
+    /// Band of the lines, Hz (modes are drawn 5 % inside it).
+    #[arg(long, value_parser = parse_band, value_name = "LO:HI", default_value = "50:2000")]
+    pub band: Band,
+    /// Noise standard deviation relative to the median magnitude (0: exact data).
+    #[arg(long, default_value_t = 1e-3)]
+    pub noise: f64,
+    /// Relative damping range LO:HI (log-uniform).
+    #[arg(long, value_name = "LO:HI", default_value = "0.002:0.02")]
+    pub damping: String,
+    /// Fraction of the modes placed as close pairs (0.1 to 1 % above another mode).
+    #[arg(long, default_value_t = 0.1)]
+    pub close_pairs: f64,
+    /// Add a free rigid body (double integrator of rank min(3, ny, nu)).
+    #[arg(long)]
+    pub rigid_body: bool,
+    /// Logarithmically spaced lines (default: uniform, as periodic excitation gives).
+    #[arg(long)]
+    pub log_grid: bool,
+    /// Seed of the plant and the noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output FRF CSV (with `_var` columns when the noise is above 0).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write the true modal parameters (truth JSON schema of the reference data).
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Also write the exact noiseless response at the same lines.
+    #[arg(long)]
+    pub noiseless: Option<PathBuf>,
 }
 
 /// Simulation path.
@@ -99,7 +154,88 @@ pub struct WaferArgs {
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     match args.target {
         Target::WaferStage(a) => run_wafer(a, quiet),
+        Target::RandomModal(a) => run_random(a, quiet),
     }
+}
+
+fn run_random(a: RandomArgs, quiet: bool) -> Result<(), FrfitError> {
+    let t0 = Instant::now();
+    let damping = {
+        let bad = || FrfitError::Argument {
+            name: "--damping".into(),
+            value: a.damping.clone(),
+            why: "expected LO:HI relative damping, e.g. 0.002:0.02".into(),
+        };
+        let (l, h) = a.damping.split_once(':').ok_or_else(bad)?;
+        (
+            l.trim().parse::<f64>().map_err(|_| bad())?,
+            h.trim().parse::<f64>().map_err(|_| bad())?,
+        )
+    };
+    let (Some(lo), Some(hi)) = (a.band.lo_hz, a.band.hi_hz) else {
+        return Err(FrfitError::Argument {
+            name: "--band".into(),
+            value: format!("{:?}:{:?}", a.band.lo_hz, a.band.hi_hz),
+            why: "random-modal needs both edges, LO:HI in Hz".into(),
+        });
+    };
+    let cfg = RandomModalConfig {
+        ny: a.ny,
+        nu: a.nu,
+        modes: a.modes,
+        lines: a.lines,
+        band_hz: (lo, hi),
+        zeta: damping,
+        close_pair_fraction: a.close_pairs,
+        rigid_body: a.rigid_body,
+        noise: a.noise,
+        log_grid: a.log_grid,
+        seed: a.seed,
+        ..RandomModalConfig::default()
+    };
+    let r = RandomModal::generate(&cfg)?;
+    let what = format!(
+        "random modal plant, seed {}: {} x {}, {} modes ({:.0} % close pairs){}, {} lines {lo}..{hi} Hz",
+        a.seed,
+        a.ny,
+        a.nu,
+        a.modes,
+        100.0 * a.close_pairs,
+        if a.rigid_body { ", free rigid body" } else { "" },
+        a.lines
+    );
+    let comments = vec![
+        what.clone(),
+        format!(
+            "continuous time, no delay; noise: circular complex Gaussian, std {:.4e} ({} x the median magnitude), stated in the _var columns",
+            r.noise_std, a.noise
+        ),
+    ];
+    frf_data::io::write_frf_csv(&a.out, &r.measured, &comments)?;
+    if let Some(t) = &a.truth {
+        let truth = r.plant.to_truth(a.seed, 0.0, 0.0);
+        let text = serde_json::to_string_pretty(&truth).map_err(|e| FrfitError::Io {
+            path: t.display().to_string(),
+            message: e.to_string(),
+        })?;
+        std::fs::write(t, text + "\n").map_err(|e| FrfitError::io(t, e))?;
+    }
+    if let Some(p) = &a.noiseless {
+        frf_data::io::write_frf_csv(
+            p,
+            &r.noiseless,
+            &[format!("{what}: exact noiseless response")],
+        )?;
+    }
+    if !quiet {
+        eprintln!(
+            "{what}: noise std {:.3e}, {:.2} s -> {}",
+            r.noise_std,
+            t0.elapsed().as_secs_f64(),
+            a.out.display()
+        );
+    }
+    Ok(())
 }
 
 fn run_wafer(a: WaferArgs, quiet: bool) -> Result<(), FrfitError> {
@@ -278,6 +414,57 @@ mod tests {
                 .unwrap();
         assert_eq!(spectra.realizations.len(), 2);
         assert_eq!(spectra.n_experiments(), 13);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// The random plant's files: the measurement with its variance, the truth (its modes
+    /// rebuild the noiseless response exactly) and the noiseless response.
+    #[test]
+    fn random_modal_writes_data_truth_and_noiseless_response() {
+        let dir = std::env::temp_dir().join(format!("frfit_simulate_rm_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let a = RandomArgs {
+            ny: 3,
+            nu: 2,
+            modes: 6,
+            lines: 300,
+            band: parse_band("20:1000").unwrap(),
+            noise: 1e-3,
+            damping: "0.005:0.01".into(),
+            close_pairs: 0.2,
+            rigid_body: true,
+            log_grid: false,
+            seed: 9,
+            out: dir.join("rm.csv"),
+            truth: Some(dir.join("rm.truth.json")),
+            noiseless: Some(dir.join("rm.noiseless.csv")),
+        };
+        run(
+            Args {
+                target: Target::RandomModal(a),
+            },
+            true,
+        )
+        .unwrap();
+        let d = frf_data::io::read_frf_csv(dir.join("rm.csv")).unwrap();
+        assert_eq!((d.ny(), d.nu(), d.n_lines()), (3, 2, 300));
+        assert!(d.has_variance());
+        let truth = Truth::read(dir.join("rm.truth.json")).unwrap();
+        assert_eq!(truth.model.modes.len(), 6);
+        assert!(truth
+            .model
+            .modes
+            .iter()
+            .all(|m| (0.005..=0.01).contains(&m.zeta) && m.f_hz > 20.0 && m.f_hz < 1000.0));
+        let plant = experiment::synth::ModalPlant::from_truth(&truth).unwrap();
+        let exact = frf_data::io::read_frf_csv(dir.join("rm.noiseless.csv")).unwrap();
+        let g = plant.continuous_response(&exact.freqs_hz()).unwrap().values;
+        let worst = g
+            .iter()
+            .zip(exact.values_vec())
+            .map(|(a, b)| (a - b).norm() / b.norm())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-12, "truth vs noiseless file: {worst:e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 
