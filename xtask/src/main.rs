@@ -7,7 +7,10 @@
 //! - `oomen-bosgra`: Section 6 of Oomen and Bosgra (model validation with disturbance
 //!   models from periodic averaging): `gamma.csv` and Figure 5.
 //! - `fuzz READER --runs N`: coverage-guided fuzzing of one reader (see `fuzz.rs`).
+//! - `bench-scale`: wall time, peak memory and accuracy of `frfit fit` on random modal
+//!   plants of growing size (see `bench_scale.rs`).
 
+mod bench_scale;
 mod fuzz;
 mod oomen_bosgra;
 mod validate;
@@ -41,6 +44,9 @@ enum Task {
     /// Coverage-guided fuzzing of one reader (csv, uff, spectra, mat, model-json) with
     /// libFuzzer through cargo-fuzz, corpus seeded from ../shared/data.
     Fuzz(fuzz::Args),
+    /// Wall time, peak memory and accuracy of `frfit fit` on random modal plants of
+    /// growing size (4x13x17, 20x20x50, 50x50x100 by default).
+    BenchScale(bench_scale::Args),
 }
 
 /// An error of a task: which stage failed and why.
@@ -87,6 +93,7 @@ fn main() -> ExitCode {
         Some(Task::WaferStage(args)) => wafer_stage::run(args),
         Some(Task::OomenBosgra(args)) => oomen_bosgra::run(args),
         Some(Task::Fuzz(args)) => fuzz::run(args),
+        Some(Task::BenchScale(args)) => bench_scale::run(args),
         None => {
             let mut cmd = Cli::command();
             match cmd.print_help() {

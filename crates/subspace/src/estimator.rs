@@ -64,7 +64,10 @@ pub struct SubspaceConfig {
     /// Model order (number of states); `None` chooses it from the singular values
     /// (largest log gap, see [`crate::order`]). Default: `None`.
     pub order: Option<usize>,
-    /// Largest order considered when it is chosen from the data. Default: 60.
+    /// Largest order considered when it is chosen from the data. Default: 60. With the
+    /// data's variance it is doubled while every singular value up to it is above the
+    /// noise threshold (and the lines support the larger order), so that a large plant
+    /// is not cut at 60 states.
     pub max_order: usize,
     /// How the order is chosen when it is not given, and whether the significance tests
     /// run (see [`OrderRule`]). Default: [`OrderRule::Auto`] (the order from the
@@ -560,50 +563,80 @@ impl SubspaceInit {
         let prepared = prepare(data, &factors, &cfg.weighting)?;
         let weighting = cfg.weighting.resolve(data);
 
-        // 2. the projection and the order
-        let n_upper = cfg.order.unwrap_or(cfg.max_order);
-        let r = match cfg.block_rows {
-            Some(r) => {
-                if r < 2 || (r - 1) * ny < n_upper {
-                    return Err(SubspaceError::invalid(
-                        "block rows",
-                        r,
-                        format!(
-                            "the shift equations (12) need (r - 1) p >= n: at least {} for order {n_upper} with {ny} outputs",
-                            n_upper.div_ceil(ny) + 1
-                        ),
-                    ));
-                }
-                r
-            }
-            None => 2 * n_upper.div_ceil(ny) + 1,
-        };
-        let needed = (r + 1).max((n_upper + 4).div_ceil(2));
-        if nl < needed {
-            return Err(SubspaceError::TooFewLines {
-                lines: nl,
-                band: band_txt,
-                block_rows: r,
-                order: n_upper,
-                needed,
-            });
-        }
-        cfg.progress
-            .step("subspace", 2, Some(4), None, "QR of the data matrix");
-        let t = Instant::now();
-        let proj = project(&prepared, r)?;
-        timings.push(("qr+svd".to_string(), t.elapsed().as_secs_f64()));
-        let sv = proj.singular_values.clone();
-        let rank = numerical_rank(&sv);
-        if rank == 0 {
-            return Err(SubspaceError::invalid(
-                "data",
-                "all zero",
-                "the projected data matrix is zero: nothing to identify",
-            ));
-        }
-        let n_max = ((r - 1) * ny).min(rank).min(cfg.max_order);
+        // 2. the projection and the order. With the data's variance, when the count of
+        // singular values above the noise threshold reaches the cap `max_order`, there
+        // are more states in the data than the cap allows (a large MIMO plant: 50 modes
+        // of rank one are 100 states): the cap is doubled and the projection repeated,
+        // while the lines support it.
         let inverse_variance = matches!(weighting, Weighting::InverseVariance);
+        let mut max_order = cfg.max_order;
+        let (r, proj, sv, rank) = loop {
+            let n_upper = cfg.order.unwrap_or(max_order);
+            let r = match cfg.block_rows {
+                Some(r) => {
+                    if r < 2 || (r - 1) * ny < n_upper {
+                        return Err(SubspaceError::invalid(
+                            "block rows",
+                            r,
+                            format!(
+                                "the shift equations (12) need (r - 1) p >= n: at least {} for order {n_upper} with {ny} outputs",
+                                n_upper.div_ceil(ny) + 1
+                            ),
+                        ));
+                    }
+                    r
+                }
+                None => 2 * n_upper.div_ceil(ny) + 1,
+            };
+            let needed = (r + 1).max((n_upper + 4).div_ceil(2));
+            if nl < needed {
+                return Err(SubspaceError::TooFewLines {
+                    lines: nl,
+                    band: band_txt,
+                    block_rows: r,
+                    order: n_upper,
+                    needed,
+                });
+            }
+            cfg.progress
+                .step("subspace", 2, Some(4), None, "QR of the data matrix");
+            let t = Instant::now();
+            let proj = project(&prepared, r)?;
+            timings.push(("qr+svd".to_string(), t.elapsed().as_secs_f64()));
+            let sv = proj.singular_values.clone();
+            let rank = numerical_rank(&sv);
+            if rank == 0 {
+                return Err(SubspaceError::invalid(
+                    "data",
+                    "all zero",
+                    "the projected data matrix is zero: nothing to identify",
+                ));
+            }
+            let n_cap = ((r - 1) * ny).min(rank).min(max_order);
+            if cfg.order.is_none()
+                && cfg.block_rows.is_none()
+                && inverse_variance
+                && n_cap == max_order
+            {
+                let above = sv[..n_cap]
+                    .iter()
+                    .filter(|&&x| x > cfg.noise_threshold)
+                    .count();
+                let next = 2 * max_order;
+                let r_next = 2 * next.div_ceil(ny) + 1;
+                let lines_next = (r_next + 1).max((next + 4).div_ceil(2));
+                if above >= n_cap && rank > n_cap && nl >= lines_next {
+                    messages.push(format!(
+                        "all {n_cap} singular values up to the order cap are above {} times the noise level: the cap doubled to {next}",
+                        cfg.noise_threshold
+                    ));
+                    max_order = next;
+                    continue;
+                }
+            }
+            break (r, proj, sv, rank);
+        };
+        let n_max = ((r - 1) * ny).min(rank).min(max_order);
         let mut order_sweep = Vec::new();
         let (n, order_rule) = match cfg.order {
             Some(n) => {
@@ -807,7 +840,7 @@ impl SubspaceInit {
                         let Some(next) = self.flexible_pass(
                             &prepared,
                             &model,
-                            r,
+                            (r, max_order),
                             ny,
                             inverse_variance,
                             &g,
@@ -1081,7 +1114,7 @@ impl SubspaceInit {
         &self,
         prepared: &crate::prepare::Prepared,
         model: &FrfModel,
-        r: usize,
+        (r, max_order): (usize, usize),
         ny: usize,
         inverse_variance: bool,
         g: &[C64],
@@ -1112,7 +1145,7 @@ impl SubspaceInit {
         if rank == 0 {
             return Ok(None);
         }
-        let n_max = ((r - 1) * ny).min(rank).min(cfg.max_order);
+        let n_max = ((r - 1) * ny).min(rank).min(max_order);
         let (n, _) = sv_proposal(sv, n_max, inverse_variance, cfg.noise_threshold);
         let o = proj.observability(n);
         let Ok((a, c, _)) = shift_a_c(&o, ny) else {

@@ -227,7 +227,7 @@ impl RandomModal {
         let noise_std = cfg.noise * median;
         let mut noisy = exact.clone();
         if noise_std > 0.0 {
-            let mut nrng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x6e6f_6973_65);
+            let mut nrng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x006e_6f69_7365);
             let s = noise_std / std::f64::consts::SQRT_2;
             for v in noisy.iter_mut() {
                 let re: f64 = StandardNormal.sample(&mut nrng);
