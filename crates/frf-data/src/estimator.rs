@@ -16,6 +16,13 @@ pub enum Convergence {
         /// The last relative change.
         relative_change: f64,
     },
+    /// The Gauss-Newton step fell below a fraction of the parameters' standard
+    /// deviations (a maximum-likelihood refiner: further steps move the estimate by
+    /// less than its own uncertainty).
+    StepInStandardDeviations {
+        /// The last step's size, in standard deviations.
+        step_std: f64,
+    },
     /// The relative cost change fell below the tolerance.
     CostTolerance {
         /// The last relative change.
@@ -40,6 +47,7 @@ impl Convergence {
             self,
             Convergence::Direct
                 | Convergence::ParameterTolerance { .. }
+                | Convergence::StepInStandardDeviations { .. }
                 | Convergence::CostTolerance { .. }
         )
     }
@@ -49,6 +57,9 @@ impl Convergence {
             Convergence::Direct => "direct estimate (no iterations)".into(),
             Convergence::ParameterTolerance { relative_change } => {
                 format!("converged: relative parameter change {relative_change:.2e}")
+            }
+            Convergence::StepInStandardDeviations { step_std } => {
+                format!("converged: the last step is {step_std:.2e} standard deviations of the parameters")
             }
             Convergence::CostTolerance { relative_change } => {
                 format!("converged: relative cost change {relative_change:.2e}")

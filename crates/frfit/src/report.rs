@@ -1208,15 +1208,22 @@ fn markdown(
                         sz
                     );
                 }
+                let test = match u.p_value {
+                    Some(p) => format!(
+                        "cost ratio V/N_dof {} against the expected {}, p = {p:.2e}",
+                        fmt_num(u.cost_ratio),
+                        fmt_num(u.expected_ratio)
+                    ),
+                    None => format!(
+                        "noise scale V/N_dof {} of the weighted residual; without a measured variance there is no goodness-of-fit test",
+                        fmt_num(u.cost_ratio)
+                    ),
+                };
                 let _ = writeln!(
                     md,
-                    "\nStandard deviations from the {} refinement ({}; cost ratio V/N_dof {}{}, covariance scaled by {}).",
+                    "\nStandard deviations from the {} refinement ({}; {test}; covariance scaled by {}).",
                     u.method,
                     u.noise,
-                    fmt_num(u.cost_ratio),
-                    u.p_value
-                        .map(|p| format!(", p = {p:.2e}"))
-                        .unwrap_or_default(),
                     fmt_num(u.covariance_scale)
                 );
             }

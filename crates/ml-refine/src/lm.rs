@@ -177,9 +177,7 @@ pub(crate) fn iterate(
         // the Gauss-Newton step in standard deviations: z2 / sigma^2, sigma^2 = V / N_dof
         let in_std = (z2 * dof / ev.cost).sqrt();
         if dof > 0.0 && in_std < s.std_step_tol {
-            conv = Convergence::ParameterTolerance {
-                relative_change: in_std,
-            };
+            conv = Convergence::StepInStandardDeviations { step_std: in_std };
             break;
         }
         let dcol = column_norms(&r, n);

@@ -82,15 +82,18 @@ pub fn print_fit(out: &PipelineOutput) {
                     None => println!("  {:>10.4}  {:>10}  {:>10.5}", m.f_hz, "", m.zeta),
                 }
             }
-            println!(
-                "uncertainty: {} ({}), cost ratio {:.3}{}",
-                u.method,
-                u.noise,
-                u.cost_ratio,
-                u.p_value
-                    .map(|p| format!(" (p = {p:.2e})"))
-                    .unwrap_or_default()
-            );
+            match u.p_value {
+                Some(p) => println!(
+                    "uncertainty: {} ({}), cost ratio V/N_dof {:.3} (expected {:.3}, p = {p:.2e})",
+                    u.method, u.noise, u.cost_ratio, u.expected_ratio
+                ),
+                // without a measured variance the ratio is the noise scale itself: it
+                // scales the covariance and tests nothing
+                None => println!(
+                    "uncertainty: {} ({}), noise scale V/N_dof {:.3e} of the weighted residual scales the covariance (no goodness-of-fit test without a measured variance)",
+                    u.method, u.noise, u.cost_ratio
+                ),
+            }
         }
         None => {
             println!("     f [Hz]      zeta");
