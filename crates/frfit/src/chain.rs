@@ -125,6 +125,7 @@ fn make_subspace(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer
             derivative_order: s.derivative_order,
             weighting: s.weighting.clone(),
             order: s.order,
+            precomputed: s.precomputed.clone(),
             progress: s.progress.clone(),
             ..Default::default()
         }),

@@ -3,7 +3,10 @@
 //! 1-6 well-separated lightly damped modes, with or without a free rigid body, in
 //! continuous time or through an exact zero-order hold) are recovered from noise-free
 //! data to 1e-8 relative, and with noise the error against the truth falls with the
-//! noise. A method that joins the registry joins this test by its name alone.
+//! noise. A method that joins the registry joins this test by its name alone: every
+//! chain runs in the tests that always run except the known failures (the `cmif`
+//! chains, and a few chain and seed pairs of the error-falls property), which run in
+//! `#[ignore]`d tests whose reasons give the numbers.
 
 use faer::Mat;
 use frf_data::{ChainSettings, DelayChoice, Frf, FrfDataset, ModelStructure};
@@ -90,11 +93,21 @@ fn settings(truth: &FrfModel) -> ChainSettings {
     }
 }
 
+/// Initialisers whose chains fail the properties below (the reasons are in the
+/// `#[ignore]` of the tests that run them): their chains run only in those ignored
+/// tests, every other registered chain in the tests that always run.
+const KNOWN_FAILING_INITS: &[&str] = &["cmif"];
+
 /// Every registered chain whose last link refines (a chain ending in `none` keeps the
-/// initialiser's rough start and is checked elsewhere).
-fn chains() -> Vec<(&'static str, &'static str)> {
+/// initialiser's rough start and is checked elsewhere): with `failing` those of the
+/// initialisers in [`KNOWN_FAILING_INITS`], otherwise all the others, so that a newly
+/// registered initialiser or refiner joins the tests that run.
+fn chains(failing: bool) -> Vec<(&'static str, &'static str)> {
     let mut v = Vec::new();
-    for i in INITIALIZERS {
+    for i in INITIALIZERS
+        .iter()
+        .filter(|i| KNOWN_FAILING_INITS.contains(&i.name) == failing)
+    {
         for r in REFINERS.iter().filter(|r| r.make.is_some()) {
             v.push((i.name, r.name));
         }
@@ -102,21 +115,128 @@ fn chains() -> Vec<(&'static str, &'static str)> {
     v
 }
 
-proptest! {
-    #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+fn cases(default: u32) -> u32 {
+    std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
+}
 
+/// Noise-free data of the system of `seed` are recovered to 1e-8 relative (median over
+/// the lines) by every chain of `chains`.
+fn recovers_noise_free(
+    chains: &[(&str, &str)],
+    seed: u64,
+    hold: bool,
+) -> Result<(), TestCaseError> {
+    let truth = system(seed, hold);
+    let d = data(&truth, 600, 0.0, seed);
+    for &(init, refine) in chains {
+        let r = run_chain(
+            &d,
+            init,
+            refine,
+            &settings(&truth),
+            &AdditiveOptions::default(),
+        )
+        .unwrap_or_else(|e| panic!("{init}+{refine} on seed {seed}: {e}"));
+        let e = error(&r.model.model, &truth, &d);
+        prop_assert!(
+            e < 1e-8,
+            "{init}+{refine}, seed {seed}, hold {hold}: median error {e:.3e}"
+        );
+        prop_assert_eq!(r.model.model.n_params() > 0, true);
+    }
+    Ok(())
+}
+
+/// The systems of the error-falls property: seeds 3, 17 and 29 (through the hold for
+/// the even ones).
+const ERROR_FALLS_SEEDS: [u64; 3] = [3, 17, 29];
+
+/// Chains (initialiser, refiner) that fail the error-falls property on a seed, beyond
+/// those of [`KNOWN_FAILING_INITS`]; run only by the ignored test, whose reason gives
+/// the numbers.
+const KNOWN_ERROR_FALLS_FAILURES: &[(&str, &str, u64)] = &[
+    ("subspace", "riv", 3),
+    ("sk", "riv", 3),
+    ("subspace", "riv", 29),
+    ("subspace", "ml", 29),
+    ("sk", "ml", 29),
+];
+
+/// The (initialiser, refiner, seed) cases of the error-falls property: with `failing`
+/// the known failures (the chains of [`KNOWN_FAILING_INITS`] on every seed and
+/// [`KNOWN_ERROR_FALLS_FAILURES`]), otherwise every other refining chain on every seed
+/// of [`ERROR_FALLS_SEEDS`], so that a newly registered chain joins the test that runs.
+fn error_falls_cases(failing: bool) -> Vec<(&'static str, &'static str, u64)> {
+    let mut v = Vec::new();
+    for seed in ERROR_FALLS_SEEDS {
+        for (init, refine) in chains(false).into_iter().chain(chains(true)) {
+            let known = KNOWN_FAILING_INITS.contains(&init)
+                || KNOWN_ERROR_FALLS_FAILURES.contains(&(init, refine, seed));
+            if known == failing {
+                v.push((init, refine, seed));
+            }
+        }
+    }
+    v
+}
+
+/// For every case (initialiser, refiner, seed) of `cases`: the median error against the
+/// truth (the middle of three noise realisations) falls at least 5x when the noise
+/// falls 10x (1e-3 -> 1e-4, 600 lines), and at least 1.6x with 4x the lines (600 ->
+/// 2400, noise 1e-3; sqrt(4) = 2 for a consistent estimator).
+fn error_falls(cases: &[(&str, &str, u64)]) {
+    for &(init, refine, seed) in cases {
+        let truth = system(seed, seed % 2 == 0);
+        let run = |lines: usize, noise: f64| -> f64 {
+            // the median over a few noise realisations keeps the ratio stable
+            let mut errs: Vec<f64> = (0..3)
+                .map(|r| {
+                    let d = data(&truth, lines, noise, seed * 100 + r);
+                    let out = run_chain(
+                        &d,
+                        init,
+                        refine,
+                        &settings(&truth),
+                        &AdditiveOptions::default(),
+                    )
+                    .unwrap_or_else(|e| panic!("{init}+{refine} on seed {seed}: {e}"));
+                    error(&out.model.model, &truth, &d)
+                })
+                .collect();
+            errs.sort_by(|a, b| a.total_cmp(b));
+            errs[1]
+        };
+        let (e3, e4) = (run(600, 1e-3), run(600, 1e-4));
+        assert!(
+            e3 / e4 >= 5.0,
+            "{init}+{refine} seed {seed}: noise 1e-3 -> {e3:.3e}, 1e-4 -> {e4:.3e}"
+        );
+        let e_many = run(2400, 1e-3);
+        assert!(
+            e3 / e_many >= 1.6,
+            "{init}+{refine} seed {seed}: 600 lines {e3:.3e}, 2400 lines {e_many:.3e}"
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases(6), ..ProptestConfig::default() })]
+
+    /// Every registered refining chain but those of [`KNOWN_FAILING_INITS`] recovers
+    /// noise-free data.
+    #[test]
+    fn noise_free_data_are_recovered(seed in 0u64..10_000, hold in any::<bool>()) {
+        recovers_noise_free(&chains(false), seed, hold)?;
+    }
+
+    /// The chains of [`KNOWN_FAILING_INITS`].
     #[test]
     #[ignore = "fails for cmif+riv: noise-free median error 1.5e-4 (seed 1142, log grid) and 8.2e-2 (seed 1149, uniform grid): the CMIF start misses or merges modes that the adaptation does not recover (issue 12, robust first fit); cmif+ml fails too: 3.3e-6 on seed 1575 (noise-free data carry no variance, so ml adds no mode); run with --ignored"]
-    fn noise_free_data_are_recovered(seed in 0u64..10_000, hold in any::<bool>()) {
-        let truth = system(seed, hold);
-        let d = data(&truth, 600, 0.0, seed);
-        for (init, refine) in chains() {
-            let r = run_chain(&d, init, refine, &settings(&truth), &AdditiveOptions::default())
-                .unwrap_or_else(|e| panic!("{init}+{refine} on seed {seed}: {e}"));
-            let e = error(&r.model.model, &truth, &d);
-            prop_assert!(e < 1e-8, "{init}+{refine}, seed {seed}, hold {hold}: median error {e:.3e}");
-            prop_assert_eq!(r.model.model.n_params() > 0, true);
-        }
+    fn noise_free_data_are_recovered_by_the_cmif_chains(seed in 0u64..10_000, hold in any::<bool>()) {
+        recovers_noise_free(&chains(true), seed, hold)?;
     }
 }
 
@@ -139,43 +259,21 @@ proptest! {
     }
 }
 
+/// Every registered refining chain on every seed but the known failures: the error
+/// falls with the noise and with the lines.
 #[test]
-#[ignore = "fails for cmif+riv on seed 17: 4x the lines lowers the median error only 1.3x (2.34e-5 -> 1.81e-5 at noise 1e-3); cmif+ml on seed 3 ends at an unstable optimum (spurious start modes at 53 and 86 Hz), reported as an error; run with --ignored"]
 fn error_falls_with_the_noise_and_with_the_lines() {
-    for seed in [3u64, 17, 29] {
-        let truth = system(seed, seed % 2 == 0);
-        for (init, refine) in chains() {
-            let run = |lines: usize, noise: f64| -> f64 {
-                // the median over a few noise realisations keeps the ratio stable
-                let mut errs: Vec<f64> = (0..3)
-                    .map(|r| {
-                        let d = data(&truth, lines, noise, seed * 100 + r);
-                        let out = run_chain(
-                            &d,
-                            init,
-                            refine,
-                            &settings(&truth),
-                            &AdditiveOptions::default(),
-                        )
-                        .unwrap();
-                        error(&out.model.model, &truth, &d)
-                    })
-                    .collect();
-                errs.sort_by(|a, b| a.total_cmp(b));
-                errs[1]
-            };
-            let (e3, e4) = (run(600, 1e-3), run(600, 1e-4));
-            assert!(
-                e3 / e4 >= 5.0,
-                "{init}+{refine} seed {seed}: noise 1e-3 -> {e3:.3e}, 1e-4 -> {e4:.3e}"
-            );
-            let e_many = run(2400, 1e-3);
-            assert!(
-                e3 / e_many >= 1.6,
-                "{init}+{refine} seed {seed}: 600 lines {e3:.3e}, 2400 lines {e_many:.3e}"
-            );
-        }
-    }
+    let cases = error_falls_cases(false);
+    assert!(cases.iter().any(|c| c.0 == "subspace"));
+    error_falls(&cases);
+}
+
+/// The known failures of the property above ([`KNOWN_FAILING_INITS`] on every seed,
+/// [`KNOWN_ERROR_FALLS_FAILURES`]).
+#[test]
+#[ignore = "known failures, medians of 3 realisations: cmif+riv on seed 17: 4x the lines lowers the error only 1.3x (2.34e-5 -> 1.81e-5 at noise 1e-3); cmif+ml on seed 3 ends at an unstable optimum (spurious start modes at 53 and 86 Hz), reported as an error. subspace+riv and sk+riv on seed 3 (1 x 3, 4 modes): 600 -> 2400 lines 2.551e-5 -> 2.025e-5 (1.26x; both starts end at the same riv optimum, realisations 1.77e-5..3.12e-5 and 6.95e-6..2.83e-5, the noise ratio is 10.0x; subspace+ml and sk+ml reach 1.94x there); subspace+riv on seed 29 (3 x 2, 6 modes): 3.401e-5 -> 2.274e-5 (1.50x; sk+riv 1.80x); subspace+ml on seed 29: ml ends at an unstable optimum on 2 of 3 realisations at 600 lines, noise 1e-3 (77.142 Hz, damping -1.63e-2; 212.962 Hz, damping -8.27e-4), reported as an error; sk+ml on seed 29: the same on 1 of 3 (33336.6 Hz, damping -1); run with --ignored"]
+fn error_falls_with_the_noise_and_with_the_lines_known_failures() {
+    error_falls(&error_falls_cases(true));
 }
 
 proptest! {

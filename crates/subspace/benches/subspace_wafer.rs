@@ -4,14 +4,19 @@
 //!
 //! - `projection`: the structured running QR of the data matrix and the SVD
 //!   ([`subspace::projection::project`]) with the default 31 block rows;
-//! - `identify`: the whole fit (projection, order, A/C, B/D (17), poles and residues).
+//! - `identify`: the whole fit (projection, order, A/C, B/D (17), poles and residues);
+//! - `identify_delay_refined`: the whole fit as `frfit fit --init subspace` runs it
+//!   without `--delay`: the delay estimated (the chain's estimate handed over, as the
+//!   pipeline does), refined with the subspace poles fixed, the subspace step repeated
+//!   with the refined delay (see `subspace::delay_refine`).
 //!
 //! Prints a message and measures nothing when the shared data are absent.
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use frf_data::delay::{estimate_delay, DelayConfig};
 use frf_data::io::read_frf_csv;
 use frf_data::shared_data::require;
-use frf_data::{DelayChoice, Weighting};
+use frf_data::{DelayChoice, Precomputed, Weighting};
 use realize::{Hold, KnownFactors};
 use std::hint::black_box;
 use std::time::Duration;
@@ -45,6 +50,18 @@ fn bench(c: &mut Criterion) {
     let init = SubspaceInit::new(cfg);
     g.bench_function("identify", |b| {
         b.iter(|| black_box(init.identify(&band).unwrap().report.order))
+    });
+    let auto = SubspaceInit::new(SubspaceConfig {
+        hold: Hold::Zoh { fs_hz: 10_000.0 },
+        delay: DelayChoice::Auto,
+        precomputed: Precomputed {
+            delay: Some(estimate_delay(&band, &DelayConfig::default()).unwrap()),
+            cmif: None,
+        },
+        ..Default::default()
+    });
+    g.bench_function("identify_delay_refined", |b| {
+        b.iter(|| black_box(auto.identify(&band).unwrap().model.factors.delay_s))
     });
     g.finish();
 }

@@ -16,7 +16,9 @@ use crate::realization::{bilinear_to_continuous, fit_b_d, shift_a_c};
 use crate::SubspaceError;
 use frf_data::chain::weighted_cost;
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
-use frf_data::{Convergence, DelayChoice, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
+use frf_data::{
+    Convergence, DelayChoice, Estimator, Fit, FrfDataset, Precomputed, ProgressSink, Weighting,
+};
 use realize::{FrfModel, Hold, KnownFactors, StateSpace, TimeDomain, C64};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -112,6 +114,9 @@ pub struct SubspaceConfig {
     pub noise_threshold: f64,
     /// Most integrators of the rigid-body part (`1/s`, `1/s^2`, ...). Default: 2.
     pub max_integrators: usize,
+    /// Analyses of the data the caller already made (the chain's: the delay estimate),
+    /// used instead of computing them again. Default: none.
+    pub precomputed: Precomputed,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -141,6 +146,7 @@ impl Default for SubspaceConfig {
             max_integrators: 2,
             noise_threshold: 4.0,
             merge_tol: 1e-3,
+            precomputed: Precomputed::default(),
             progress: ProgressSink::none(),
         }
     }
@@ -350,7 +356,10 @@ impl SubspaceInit {
             DelayChoice::Start { seconds } => (seconds, true),
             DelayChoice::Auto => {
                 let t = Instant::now();
-                let est = estimate_delay(data, &cfg.delay_config)?;
+                let est = match &cfg.precomputed.delay {
+                    Some(d) => d.clone(),
+                    None => estimate_delay(data, &cfg.delay_config)?,
+                };
                 timings.push(("delay".to_string(), t.elapsed().as_secs_f64()));
                 let tau = est.tau_s - hold_share;
                 messages.push(format!(
@@ -436,7 +445,7 @@ impl SubspaceInit {
             // the threshold of the robust cost that compares the passes: fixed by the first
             let thr = *threshold.get_or_insert(ROBUST_LINE_C * med_start);
             let robust_start = huber(&line_residuals(&cur.model, &omega, &g, &w)?, thr);
-            let fast = RotatedCost::new(&dc, rw)?;
+            let fast = RotatedCost::new(&dc, rw)?.expanded(tau_div, half_width);
             let min = delay_refine::minimise(|t| fast.at(t), tau_div, half_width, cfg.delay_grid);
             let exact = dc.at(min.tau)?;
             let robust_refined = huber(&line_residuals(&exact.model, &omega, &g, &w)?, thr);

@@ -51,15 +51,17 @@ pub fn fit_b_d(
     c: &Mat<f64>,
 ) -> Result<(Mat<f64>, Mat<f64>, f64, f64), SubspaceError> {
     let (p, nu, nl, n) = (d.ny, d.nu, d.n_lines(), a.nrows());
-    // Phi_k = C (xi_k I - A)^{-1} (p x n), Hessenberg evaluation (defective A is fine)
+    // Phi_k = C (xi_k I - A)^{-1} (p x n), Hessenberg evaluation (defective A is fine),
+    // as the transpose (xi_k I - A^T)^{-1} C^T: p right-hand sides per line, not n
     let ss = StateSpace::new(
-        a.clone(),
+        a.transpose().to_owned(),
+        c.transpose().to_owned(),
         Mat::identity(n, n),
-        c.clone(),
-        Mat::zeros(p, n),
+        Mat::zeros(n, p),
         TimeDomain::Discrete { ts: 1.0 },
     )?;
-    let phi = ss.freq_response_at(&d.xi)?;
+    let phi_t = ss.freq_response_at(&d.xi)?;
+    let phi = |k: usize, o: usize, l: usize| phi_t.get(k, l, o);
     let mut b = Mat::<f64>::zeros(n, nu);
     let mut dd = Mat::<f64>::zeros(p, nu);
     let mut worst = 1.0f64;
@@ -87,7 +89,7 @@ pub fn fit_b_d(
             for o in 0..p {
                 let w = weight(k, j * p + o);
                 for l in 0..n {
-                    scale[l] += w * phi.get(k, o, l).norm_sqr();
+                    scale[l] += w * phi(k, o, l).norm_sqr();
                 }
                 scale[n + o] += w;
             }
@@ -105,7 +107,7 @@ pub fn fit_b_d(
                     let sw = weight(k, j * p + o).sqrt();
                     let (re, im) = (2 * ((k - k0) * p + o), 2 * ((k - k0) * p + o) + 1);
                     for l in 0..n {
-                        let f = phi.get(k, o, l) * (sw / scale[l]);
+                        let f = phi(k, o, l) * (sw / scale[l]);
                         block[(re, l)] = f.re;
                         block[(im, l)] = f.im;
                     }
