@@ -65,6 +65,7 @@ struct Accuracy {
     modes: usize,
     fitted: usize,
     median_error: f64,
+    convergence: String,
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize, usize), Error> {
@@ -178,6 +179,7 @@ fn accuracy(model: &Path, r: &RandomModal) -> Result<Accuracy, Error> {
         modes: true_f.len(),
         fitted: fit_f.len(),
         median_error,
+        convergence: mf.provenance.convergence.clone(),
     })
 }
 
@@ -246,7 +248,7 @@ pub fn run(a: Args) -> Result<(), Error> {
         std::fs::remove_file(&data).ok();
     }
     let mut md = format!(
-        "# frfit fit at scale\n\n`--init {} --refine {}`, {} uniform lines 50..2000 Hz, relative noise {:.0e}, seed {}, rank-one modes with 10 % close pairs (`frfit simulate random-modal`).\n\n| size (ny x nu x modes) | wall [s] | peak RSS [MB] | modes within 0.1 % | fitted modes | median error vs noiseless | noise std / median abs |\n|---|---|---|---|---|---|---|\n",
+        "# frfit fit at scale\n\n`--init {} --refine {}`, {} uniform lines 50..2000 Hz, relative noise {:.0e}, seed {}, rank-one modes with 10 % close pairs (`frfit simulate random-modal`).\n\n| size (ny x nu x modes) | wall [s] | peak RSS [MB] | modes within 0.1 % | fitted modes | median error vs noiseless | noise std / median abs | last link |\n|---|---|---|---|---|---|---|---|\n",
         a.init, a.refine, a.lines, a.noise, a.seed
     );
     for r in &rows {
@@ -262,7 +264,7 @@ pub fn run(a: Args) -> Result<(), Error> {
             Err(e) => {
                 let _ = writeln!(
                     md,
-                    "| {} | {:.1} | {mem} | failed: {} | | | |",
+                    "| {} | {:.1} | {mem} | failed: {} | | | | |",
                     r.size,
                     r.wall_s,
                     e.replace('|', "/")
