@@ -257,8 +257,15 @@ pub fn run(a: Args) -> Result<(), Error> {
             Ok(acc) => {
                 let _ = writeln!(
                     md,
-                    "| {} | {:.1} | {mem} | {}/{} | {} | {:.2e} | {:.0e} |",
-                    r.size, r.wall_s, acc.found, acc.modes, acc.fitted, acc.median_error, a.noise
+                    "| {} | {:.1} | {mem} | {}/{} | {} | {:.2e} | {:.0e} | {} |",
+                    r.size,
+                    r.wall_s,
+                    acc.found,
+                    acc.modes,
+                    acc.fitted,
+                    acc.median_error,
+                    a.noise,
+                    acc.convergence.replace('|', "/")
                 );
             }
             Err(e) => {
