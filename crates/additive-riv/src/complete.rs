@@ -40,9 +40,9 @@ pub struct CompleteConfig {
     /// Rounds of the residual-driven completion. Default: 6 (the harness's systems hold
     /// up to 6 modes, of which a poor start may miss half).
     pub max_rounds: usize,
-    /// At most this many modes added per round (strongest residual peaks first).
-    /// Default: 3.
-    pub max_new_per_round: usize,
+    /// At most this many candidates tried per round, one at a time, the strongest
+    /// residual peak first; the first that passes is kept. Default: 2.
+    pub max_trials_per_round: usize,
     /// Relative parameter tolerance of the pole settling. Default: 1e-4 (a fraction of a
     /// bandwidth is what the residual diagnosis needs).
     pub coarse_tol: f64,
@@ -52,6 +52,9 @@ pub struct CompleteConfig {
     /// factor above the median of the residual's `sigma_1^2` over the band. Default: 10
     /// (as [`crate::structure::PEAK_OVER_LOCAL`]: noise peaks stay below).
     pub peak_over_median: f64,
+    /// Residual peaks closer than this relative distance to a stronger one are one
+    /// candidate. Default: 0.025 (as [`crate::structure::AdaptConfig::min_separation`]).
+    pub min_separation: f64,
     /// Added modes are kept only when the cost falls by at least this fraction. Default:
     /// 0.1: the start is completed with what the data plainly show; weak modes are left
     /// to the refiner's own adaptation.
@@ -73,7 +76,13 @@ pub struct CompleteConfig {
     /// Damping of an added mode when the residual peak gives no half-power estimate.
     /// Default: 0.01.
     pub zeta0: f64,
-    /// The picker on the residual's CMIF. Default: [`PeakConfig::default`].
+    /// The picker on the residual's CMIF. Default: [`PeakConfig::default`] with a
+    /// minimum prominence of 1 dB and no noise estimate from the second differences:
+    /// the residual of a start that misses overlapping modes is a smooth, broad misfit
+    /// whose peaks rise little above their flanks, and the weighting's sharp features
+    /// (at the data's resonances) would be taken for noise. The picker only places the
+    /// candidates; the cost test of each trial decides. With inverse-variance weights
+    /// the residual's unit variance still corrects the prominences.
     pub peaks: PeakConfig,
 }
 
@@ -81,17 +90,22 @@ impl Default for CompleteConfig {
     fn default() -> Self {
         Self {
             max_rounds: 6,
-            max_new_per_round: 3,
+            max_trials_per_round: 2,
             coarse_tol: 1e-4,
             coarse_max_iterations: 15,
             peak_over_median: 10.0,
             min_cost_drop: 0.1,
+            min_separation: 0.025,
             min_f: 25.0,
             alpha: 1e-3,
             merge_fraction: 0.25,
             rounding_floor: 1e-10,
             zeta0: 0.01,
-            peaks: PeakConfig::default(),
+            peaks: PeakConfig {
+                min_prominence_db: 1.0,
+                estimate_noise: false,
+                ..PeakConfig::default()
+            },
         }
     }
 }
@@ -241,6 +255,77 @@ fn mode_list(model: &AdditiveModel) -> Vec<(f64, f64)> {
     model.modes().iter().map(|m| (m.f_hz, m.zeta)).collect()
 }
 
+/// Removes the modes of `model` whose numerators are not significant (F statistic of
+/// the Wald cost increase below the F test at `alpha` and below `min_f`), the weakest
+/// first and one at a time, settling the poles after each removal. A mode whose cost
+/// increase is below the rounding floor ([`CompleteConfig::rounding_floor`], squared, of
+/// the weighted data's energy) counts as insignificant. A mode added where
+/// the residual was largest may become redundant once the others are in place (two
+/// candidates in one broad misfit); on noise-free data such a mode only fits rounding.
+fn prune_insignificant(
+    mut cur: AdditiveModel,
+    data: &FitData,
+    cfg: &CompleteConfig,
+    coarse: &RivConfig,
+    its: &mut usize,
+    report: &mut CompleteReport,
+) -> AdditiveModel {
+    let m = data.m();
+    let n_modes = cur.modes().len();
+    // the weighted data's energy: a mode that explains less than the rounding floor of
+    // it explains nothing, whatever its F statistic against a rounding-level residual
+    let energy: f64 = data
+        .w
+        .iter()
+        .zip(&data.g)
+        .map(|(w, g)| w * g.norm_sqr())
+        .sum();
+    for _ in 0..n_modes {
+        let Ok(dv) = submodel_cost_increase(&cur, data) else {
+            break;
+        };
+        let v = model_cost(&cur, data, None);
+        let s2 = noise_scale(v, data, cur.n_params());
+        let rounding = cfg.rounding_floor * cfg.rounding_floor * energy;
+        let weakest = (0..cur.submodels.len())
+            .filter(|&i| cur.submodels[i].kind == SubmodelKind::Mode)
+            .map(|i| {
+                let p = cur.submodels[i].den.len() + cur.submodels[i].num.len() * m;
+                let fs = f_statistic(dv[i], p, s2);
+                let ratio = if dv[i] < rounding {
+                    0.0
+                } else {
+                    fs / f_critical(p, cfg.alpha).max(cfg.min_f)
+                };
+                (i, fs, ratio)
+            })
+            .min_by(|a, b| a.2.total_cmp(&b.2));
+        let Some((i, fs, ratio)) = weakest else {
+            break;
+        };
+        if ratio >= 1.0 || cur.modes().len() <= 1 {
+            break;
+        }
+        let f = cur
+            .upper_pole(&cur.submodels[i])
+            .map_or(f64::NAN, |p| p.norm() / TAU);
+        let mut trial = cur.clone();
+        trial.remove_submodel(i);
+        if fit_numerators(&mut trial, data).is_err() {
+            break;
+        }
+        cur = settle(trial.clone(), data, coarse, its).unwrap_or(trial);
+        if let Some(k) = report.added.iter().position(|a| (a - f).abs() <= 0.05 * f) {
+            report.added.remove(k);
+        }
+        report.rejected.push((
+            f,
+            format!("not significant once the others were in (F = {fs:.2})"),
+        ));
+    }
+    cur
+}
+
 /// True when two modes of `model` sit on practically one pole (closer than
 /// [`crate::structure::DUPLICATE_FRACTION`] of their mean `|Re p|`): not identifiable.
 fn has_duplicate(model: &AdditiveModel) -> bool {
@@ -306,7 +391,18 @@ fn residual_candidates(
         })
         .collect();
     peaks.sort_by(|a, b| b.sv2.total_cmp(&a.sv2));
-    peaks.into_iter().map(|p| (p.f_hz, p.damping)).collect()
+    // one candidate per misfit: a broad residual bump is picked on several lines and
+    // singular values; the strongest pick stands for the others nearby
+    let mut out: Vec<(f64, Option<f64>)> = Vec::new();
+    for p in peaks {
+        if out
+            .iter()
+            .all(|(f, _)| (p.f_hz - f).abs() > cfg.min_separation * f)
+        {
+            out.push((p.f_hz, p.damping));
+        }
+    }
+    out
 }
 
 /// Adds a mode at `f_hz` with damping `zeta` to `model`; a frequency inside the
@@ -390,14 +486,16 @@ pub fn complete_start(
                 break;
             }
             // all candidates of the round at once, else the strongest alone
-            let n_all = cands.len().min(cfg.max_new_per_round);
+            // one candidate at a time, the strongest first: the first that lowers the
+            // cost significantly is kept (a broad misfit has side peaks that a mode at
+            // its centre removes too)
             let mut accepted = None;
-            let takes: &[usize] = if n_all > 1 { &[n_all, 1] } else { &[1] };
-            for &take in takes {
+            for c in 0..cands.len().min(cfg.max_trials_per_round) {
+                let cand = &cands[c..=c];
                 let mut trial = cur.clone();
                 let n_old = trial.submodels.len();
                 let mut ok = true;
-                for &(f, z) in cands.iter().take(take) {
+                for &(f, z) in cand.iter() {
                     let zeta = z.unwrap_or(cfg.zeta0).clamp(1e-3, 0.2);
                     if push_candidate(&mut trial, f, zeta).is_err() {
                         ok = false;
@@ -413,7 +511,7 @@ pub fn complete_start(
                     continue;
                 };
                 if has_duplicate(&trial) {
-                    for &(f, _) in cands.iter().take(take) {
+                    for &(f, _) in cand.iter() {
                         report
                             .rejected
                             .push((f, "settled on the pole of another mode".into()));
@@ -429,14 +527,11 @@ pub fn complete_start(
                     accepted = Some((trial, vt, n_old));
                     break;
                 }
-                for &(f, _) in cands.iter().take(take) {
+                for &(f, _) in cand.iter() {
                     report.rejected.push((
                         f,
                         format!("cost {v:.3e} -> {vt:.3e} (F = {fs:.1}, needed {fcrit:.1} and a {:.0} % drop)", 100.0 * cfg.min_cost_drop),
                     ));
-                }
-                if take == 1 {
-                    break;
                 }
             }
             let Some((mut trial, mut vt, n_old)) = accepted else {
@@ -484,6 +579,9 @@ pub fn complete_start(
                 (cur, v) = rechoose(cur, v, &mut its);
             }
         }
+    }
+    if add_modes {
+        cur = prune_insignificant(cur, data, cfg, &coarse, &mut its, &mut report);
     }
     report.integrators.1 = integrators_of(&cur);
     report.iterations = its;
