@@ -183,7 +183,7 @@ impl AdditiveFitter {
             weighting: cfg.riv.weighting.clone(),
             progress: cfg.progress.clone(),
             precomputed: Default::default(),
-            complete: Some(Default::default()),
+            complete: None,
         })
         .estimate(data, ())?;
         cfg.progress
