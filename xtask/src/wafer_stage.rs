@@ -298,11 +298,12 @@ pub fn run(args: Args) -> Result<(), Error> {
                 .stage("validation experiment")?;
             let est2 = sim2.run().stage("validation experiment")?;
             let (lo, hi) = (out.band.freq_hz(0), out.band.freq_hz(out.band.n_lines() - 1));
-            let vdata = est2
+            let band = est2
                 .frf
                 .band(lo, hi)
-                .stage("validation experiment band")?
-                .to_frf();
+                .stage("validation experiment band")?;
+            let lines = band.line_range();
+            let vdata = band.to_frf();
             std::fs::create_dir_all(&vdir).stage("validation-experiment directory")?;
             frf_data::io::write_frf_csv(
                 vdir.join(DATA_NAME),
@@ -323,7 +324,20 @@ pub fn run(args: Args) -> Result<(), Error> {
                 variance_dof: Some(2.0 * (realizations as f64 - 1.0)),
                 ..FrfValidationConfig::default()
             };
-            let v = validate_frf(&grid, &vdata, None, &vcfg).stage("validation")?;
+            // the estimator's disturbance covariance C_v of the band's lines: the shape
+            // across outputs of each line's disturbance model (Prop. 9, eqs. 16-18)
+            let m = vdata.ny() * vdata.ny();
+            let cv = est2
+                .disturbance_covariance
+                .as_deref()
+                .and_then(|c| c.get(lines.start * m..lines.end * m));
+            if cv.is_none() {
+                eprintln!(
+                    "note: the second experiment gives no disturbance covariance; the \
+                     per-entry variances are used"
+                );
+            }
+            let v = validate_frf(&grid, &vdata, cv, &vcfg).stage("validation")?;
             write_validation_dir(
                 &vdir,
                 "../model.json",

@@ -45,6 +45,27 @@ pub struct ModeJson {
     pub residue: ComplexMatrix,
     /// Numerical rank of the residue (singular values above [`RANK_TOL`] of the largest).
     pub rank: usize,
+    /// Standard deviation of `f_hz`, Hz, when the refiner computed a covariance
+    /// (`--refine ml`: the inverse Fisher information at the optimum, by the delta
+    /// method); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub f_hz_std: Option<f64>,
+    /// Standard deviation of `zeta`, when the refiner computed a covariance; absent
+    /// otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zeta_std: Option<f64>,
+}
+
+/// The standard deviations of one mode's frequency and damping (from a refiner's
+/// covariance), for [`ModelFile::set_uncertainty`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModeStd {
+    /// Natural frequency, Hz (matches the mode).
+    pub f_hz: f64,
+    /// Standard deviation of the natural frequency, Hz.
+    pub f_hz_std: f64,
+    /// Standard deviation of the relative damping.
+    pub zeta_std: f64,
 }
 
 /// The rigid-body part `sum_k R_k / s^k`.
@@ -137,6 +158,10 @@ pub struct ModelFile {
     pub delay_s: f64,
     /// Whether the delay was a fitted parameter.
     pub delay_fitted: bool,
+    /// Standard deviation of a fitted `delay_s`, seconds, when the refiner computed a
+    /// covariance; absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_s_std: Option<f64>,
     /// The hold: `"zoh:FS"` (exact, in the domain), `"sinc:FS"` (amplitude factor) or
     /// `"none"`.
     pub hold: String,
@@ -216,6 +241,8 @@ impl ModelFile {
                             .collect(),
                     },
                     rank: sv.iter().filter(|&&s| s > RANK_TOL * top).count(),
+                    f_hz_std: None,
+                    zeta_std: None,
                 }
             })
             .collect();
@@ -239,6 +266,7 @@ impl ModelFile {
             domain: model.domain(),
             delay_s: model.factor.delay_s,
             delay_fitted: model.factor.fit_delay,
+            delay_s_std: None,
             hold,
             derivative_order: model.factor.derivative_order,
             modes,
@@ -367,6 +395,7 @@ impl ModelFile {
                 )));
             }
         }
+        self.check_uncertainty()?;
         let integrators = self.rigid_body.as_ref().map_or(0, |r| r.integrators);
         if integrators != mm.rigid.len() {
             return Err(mismatch(
@@ -375,6 +404,72 @@ impl ModelFile {
                 mm.rigid.len() as f64,
             ));
         }
+        Ok(())
+    }
+
+    /// The standard deviations are not derivable from the submodels: they are checked
+    /// for what they can be checked (present in pairs, finite, non-negative, a delay
+    /// standard deviation only for a fitted delay); the error names the field.
+    fn check_uncertainty(&self) -> Result<(), RivError> {
+        let check = |field: String, v: Option<f64>| match v {
+            Some(x) if !(x.is_finite() && x >= 0.0) => Err(RivError::Structure(format!(
+                "{field} is {x}: a standard deviation must be finite and non-negative"
+            ))),
+            _ => Ok(()),
+        };
+        for (i, m) in self.modes.iter().enumerate() {
+            check(format!("modes[{i}].f_hz_std"), m.f_hz_std)?;
+            check(format!("modes[{i}].zeta_std"), m.zeta_std)?;
+            if m.f_hz_std.is_some() != m.zeta_std.is_some() {
+                let (has, lacks) = if m.f_hz_std.is_some() {
+                    ("f_hz_std", "zeta_std")
+                } else {
+                    ("zeta_std", "f_hz_std")
+                };
+                return Err(RivError::Structure(format!(
+                    "modes[{i}] has {has} but no {lacks}: both come from one covariance"
+                )));
+            }
+        }
+        check("delay_s_std".into(), self.delay_s_std)?;
+        if self.delay_s_std.is_some() && !self.delay_fitted {
+            return Err(RivError::Structure(
+                "delay_s_std is given but delay_fitted is false: only a fitted delay has a standard deviation".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Writes the standard deviations of a refiner's covariance into the modal form:
+    /// each mode of the file takes `f_hz_std` and `zeta_std` of the entry of `modes`
+    /// nearest in frequency (within 1e-6 relative: the same model), and `delay_s_std`
+    /// is set when the delay was fitted. An error names a mode without a match, a
+    /// standard deviation that is not finite and non-negative, or a delay standard
+    /// deviation for a delay that was not fitted; the file is unchanged then.
+    pub fn set_uncertainty(
+        &mut self,
+        modes: &[ModeStd],
+        delay_s_std: Option<f64>,
+    ) -> Result<(), RivError> {
+        let mut next = self.clone();
+        for (i, m) in next.modes.iter_mut().enumerate() {
+            let near = modes
+                .iter()
+                .filter(|u| (u.f_hz - m.f_hz).abs() <= 1e-6 * m.f_hz.abs())
+                .min_by(|a, b| (a.f_hz - m.f_hz).abs().total_cmp(&(b.f_hz - m.f_hz).abs()))
+                .ok_or_else(|| {
+                    RivError::Structure(format!(
+                        "modes[{i}] at {} Hz has no standard deviation in the covariance given (its modes: {:?} Hz)",
+                        m.f_hz,
+                        modes.iter().map(|u| u.f_hz).collect::<Vec<_>>()
+                    ))
+                })?;
+            m.f_hz_std = Some(near.f_hz_std);
+            m.zeta_std = Some(near.zeta_std);
+        }
+        next.delay_s_std = delay_s_std;
+        next.check_uncertainty()?;
+        *self = next;
         Ok(())
     }
 
@@ -517,5 +612,121 @@ mod tests {
         assert!(e.contains("modes[0].residue is not 2x2"), "{e}");
         let e = edited(&|v| v["rigid_body"]["integrators"] = serde_json::json!(1));
         assert!(e.contains("rigid_body.integrators"), "{e}");
+    }
+
+    fn two_mode_file(fit_delay: bool) -> ModelFile {
+        let mut m = AdditiveModel::new(2, 1, Domain::Continuous).unwrap();
+        m.push_mode(10.0, 0.1, false).unwrap();
+        m.push_mode(40.0, 0.02, false).unwrap();
+        for s in &mut m.submodels {
+            for b in &mut s.num {
+                b[(0, 0)] = 1.0;
+                b[(1, 0)] = -0.5;
+            }
+        }
+        let m = m
+            .with_factor(KnownFactor {
+                delay_s: 2e-4,
+                fit_delay,
+                ..Default::default()
+            })
+            .unwrap();
+        ModelFile::from_model(&m, None, None, Provenance::default()).unwrap()
+    }
+
+    /// Without a covariance the fields are absent from the text; an older file without
+    /// them reads; with one they are written, read back and checked.
+    #[test]
+    fn standard_deviations_are_optional_and_round_trip() {
+        let mut f = two_mode_file(true);
+        let text = serde_json::to_string(&f).unwrap();
+        assert!(!text.contains("f_hz_std") && !text.contains("delay_s_std"));
+        let old: ModelFile = serde_json::from_str(&text).unwrap();
+        old.to_model()
+            .expect("a file without standard deviations reads");
+        assert!(old.modes.iter().all(|m| m.f_hz_std.is_none()));
+        let stds = [
+            ModeStd {
+                f_hz: f.modes[1].f_hz * (1.0 + 1e-9),
+                f_hz_std: 0.02,
+                zeta_std: 3e-4,
+            },
+            ModeStd {
+                f_hz: f.modes[0].f_hz,
+                f_hz_std: 0.01,
+                zeta_std: 1e-3,
+            },
+        ];
+        f.set_uncertainty(&stds, Some(1e-7)).unwrap();
+        assert_eq!(
+            (f.modes[0].f_hz_std, f.modes[0].zeta_std),
+            (Some(0.01), Some(1e-3))
+        );
+        assert_eq!(
+            (f.modes[1].f_hz_std, f.modes[1].zeta_std),
+            (Some(0.02), Some(3e-4))
+        );
+        let text = serde_json::to_string(&f).unwrap();
+        let back: ModelFile = serde_json::from_str(&text).unwrap();
+        back.to_model().unwrap();
+        assert_eq!(back, f);
+        // a mode without a match, or a delay that was not fitted: errors, file unchanged
+        let before = f.clone();
+        let e = f.set_uncertainty(&stds[1..], None).unwrap_err().to_string();
+        assert!(e.contains("modes[1]"), "{e}");
+        assert_eq!(f, before);
+        let mut g = two_mode_file(false);
+        let e = g
+            .set_uncertainty(&stds, Some(1e-7))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("delay_s_std"), "{e}");
+        let e = g
+            .set_uncertainty(
+                &[
+                    stds[0],
+                    ModeStd {
+                        zeta_std: f64::NAN,
+                        ..stds[1]
+                    },
+                ],
+                None,
+            )
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("modes[0].zeta_std"), "{e}");
+    }
+
+    /// Edited standard deviations: the error names the field.
+    #[test]
+    fn edited_standard_deviations_are_named() {
+        let mut f = two_mode_file(true);
+        let stds: Vec<ModeStd> = f
+            .modes
+            .iter()
+            .map(|m| ModeStd {
+                f_hz: m.f_hz,
+                f_hz_std: 0.01,
+                zeta_std: 1e-3,
+            })
+            .collect();
+        f.set_uncertainty(&stds, Some(1e-7)).unwrap();
+        let text = serde_json::to_string(&f).unwrap();
+        let edited = |edit: &dyn Fn(&mut serde_json::Value)| {
+            let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+            edit(&mut v);
+            let g: ModelFile = serde_json::from_value(v).unwrap();
+            g.to_model().unwrap_err().to_string()
+        };
+        let e = edited(&|v| v["modes"][1]["f_hz_std"] = serde_json::json!(-0.5));
+        assert!(e.contains("modes[1].f_hz_std is -0.5"), "{e}");
+        let e = edited(&|v| {
+            v["modes"][0].as_object_mut().unwrap().remove("zeta_std");
+        });
+        assert!(e.contains("modes[0] has f_hz_std but no zeta_std"), "{e}");
+        let e = edited(&|v| v["delay_s_std"] = serde_json::json!(-1e-6));
+        assert!(e.contains("delay_s_std is -0.000001"), "{e}");
+        let e = edited(&|v| v["delay_fitted"] = serde_json::json!(false));
+        assert!(e.contains("delay_fitted is false"), "{e}");
     }
 }

@@ -164,6 +164,96 @@ fn refine_ml_reports_the_uncertainty_of_the_modes() {
     );
 }
 
+/// `--refine ml` writes each mode's `f_hz_std` and `zeta_std` and the fitted delay's
+/// `delay_s_std` to the model file, equal to what `summary.json` reports; `frfit eval`
+/// and `frfit export` read the file; `--refine riv` writes none of them.
+#[test]
+fn refine_ml_writes_the_standard_deviations_to_the_model_file() {
+    let dir = temp_dir("chain-ml-model");
+    let csv = write_plant(&dir, 2e-4);
+    let report = dir.join("report");
+    let (ml, riv) = (dir.join("ml.json"), dir.join("riv.json"));
+    for (refine, path) in [("ml", &ml), ("riv", &riv)] {
+        let o = run(&[
+            "fit",
+            csv.to_str().unwrap(),
+            "--delay",
+            "auto",
+            "--refine",
+            refine,
+            "--out",
+            path.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+            "--quiet",
+        ]);
+        assert!(o.status.success(), "{refine}: {}", stderr(&o));
+        if refine == "ml" {
+            let m = read_json(&ml);
+            let s = read_json(&report.join("summary.json"));
+            let u = &s["uncertainty"];
+            let modes = m["modes"].as_array().unwrap();
+            assert_eq!(modes.len(), MODES_HZ.len(), "{m}");
+            for mo in modes {
+                let f = mo["f_hz"].as_f64().unwrap();
+                let (sf, sz) = (
+                    mo["f_hz_std"].as_f64().expect("f_hz_std"),
+                    mo["zeta_std"].as_f64().expect("zeta_std"),
+                );
+                assert!(
+                    sf.is_finite() && sf > 0.0 && sz.is_finite() && sz > 0.0,
+                    "{mo}"
+                );
+                let us = u["modes"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .find(|x| (x["f_hz"].as_f64().unwrap() / f - 1.0).abs() < 1e-9)
+                    .unwrap_or_else(|| panic!("mode at {f} Hz in summary.json: {u}"));
+                assert_eq!(us["f_hz_std"].as_f64(), Some(sf), "{us} vs {mo}");
+                assert_eq!(us["zeta_std"].as_f64(), Some(sz), "{us} vs {mo}");
+            }
+            assert_eq!(m["delay_fitted"], true);
+            let sd = m["delay_s_std"].as_f64().expect("delay_s_std");
+            assert!(sd.is_finite() && sd > 0.0, "{sd}");
+            assert_eq!(u["delay_s_std"].as_f64(), Some(sd));
+            // the true delay is inside a few standard deviations
+            let d = m["delay_s"].as_f64().unwrap();
+            assert!((d - 2e-4).abs() < 5.0 * sd, "delay {d} +- {sd}");
+        } else {
+            let m = read_json(&riv);
+            assert!(m.get("delay_s_std").is_none(), "{m}");
+            for mo in m["modes"].as_array().unwrap() {
+                assert!(
+                    mo.get("f_hz_std").is_none() && mo.get("zeta_std").is_none(),
+                    "{mo}"
+                );
+            }
+        }
+    }
+    // the file with standard deviations is read by eval and export
+    let pred = dir.join("pred.csv");
+    let o = run(&[
+        "eval",
+        ml.to_str().unwrap(),
+        "--at",
+        csv.to_str().unwrap(),
+        "--out",
+        pred.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "eval: {}", stderr(&o));
+    let ss = dir.join("ss.json");
+    let o = run(&[
+        "export",
+        ml.to_str().unwrap(),
+        "--out",
+        ss.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "export: {}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `--init cmif,subspace`: both chains run, the one with the smallest final prediction
 /// error is kept, and every run is in summary.json's `chain_runs`.
 #[test]

@@ -13,6 +13,22 @@ fn read_json(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// The 2 x 3 plant written into `dir` and fitted (`--delay none`): its CSV and model.
+fn fit_plant(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let csv = write_plant(dir, 0.0);
+    let model = dir.join("model.json");
+    let o = run(&[
+        "fit",
+        csv.to_str().unwrap(),
+        "--delay",
+        "none",
+        "--out",
+        model.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    (csv, model)
+}
 fn validate(
     model: &std::path::Path,
     csv: &std::path::Path,
@@ -35,18 +51,7 @@ fn validate(
 #[test]
 fn validate_a_fitted_model_and_one_with_a_mode_removed() {
     let dir = temp_dir("validate");
-    let csv = write_plant(&dir, 0.0);
-    let model = dir.join("model.json");
-    let o = run(&[
-        "fit",
-        csv.to_str().unwrap(),
-        "--delay",
-        "none",
-        "--out",
-        model.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let (csv, model) = fit_plant(&dir);
 
     let v = validate(&model, &csv, &dir.join("full"));
     assert_eq!(v["alpha"].as_f64(), Some(0.99));
@@ -138,18 +143,7 @@ fn validate_a_fitted_model_and_one_with_a_mode_removed() {
 #[test]
 fn validate_reports_bad_input() {
     let dir = temp_dir("validate-bad");
-    let csv = write_plant(&dir, 0.0);
-    let model = dir.join("model.json");
-    let o = run(&[
-        "fit",
-        csv.to_str().unwrap(),
-        "--delay",
-        "none",
-        "--out",
-        model.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let (csv, model) = fit_plant(&dir);
     let out = dir.join("v");
     let o = run(&[
         "validate",
@@ -221,4 +215,61 @@ fn diagnose_validates_its_final_model() {
     ]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains("missing.csv"), "{}", stderr(&o));
+}
+
+/// A variance estimated from R realizations (the file's comment says how many) widens
+/// the disturbance radii to the F(2, 2(R-1)) quantile: `validate` reads R from the
+/// comments, records the degrees of freedom, and every line's bound grows and its gamma
+/// does not (the same data and model without the comment take the variance as exact).
+#[test]
+fn validate_reads_the_realizations_from_the_comments() {
+    let dir = temp_dir("validate-realizations");
+    let (csv, model) = fit_plant(&dir);
+    // a model a little off the data (a 10 us delay it does not have: a phase error of
+    // 0.6 % at 100 Hz against a noise of 0.1 %), so that gamma is not zero everywhere
+    let mut json = read_json(&model);
+    json["delay_s"] = serde_json::json!(1e-5);
+    let model = dir.join("delayed.json");
+    std::fs::write(&model, serde_json::to_string(&json).unwrap()).unwrap();
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let commented = dir.join("commented.csv");
+    std::fs::write(&commented, format!("# 10 periods x 3 realizations\n{text}")).unwrap();
+
+    let exact = validate(&model, &csv, &dir.join("exact"));
+    let est = validate(&model, &commented, &dir.join("estimated"));
+    assert!(exact["variance_dof"].is_null(), "{}", exact["variance_dof"]);
+    assert_eq!(est["variance_dof"].as_f64(), Some(4.0));
+    let (le, ls) = (
+        exact["lines"].as_array().unwrap(),
+        est["lines"].as_array().unwrap(),
+    );
+    assert_eq!(le.len(), ls.len());
+    let (mut wider, mut positive) = (0, 0);
+    for (a, b) in le.iter().zip(ls) {
+        let (da, db) = (
+            a["disturbance_bound"].as_f64().unwrap(),
+            b["disturbance_bound"].as_f64().unwrap(),
+        );
+        let (ga, gb) = (a["gamma"].as_f64().unwrap(), b["gamma"].as_f64().unwrap());
+        assert!(db > da, "bound {db} not above {da} at {} Hz", a["f_hz"]);
+        wider += usize::from(db > 1.5 * da);
+        assert!(
+            gb <= ga * (1.0 + 1e-12),
+            "gamma {gb} above {ga} at {} Hz",
+            a["f_hz"]
+        );
+        positive += usize::from(gb > 0.0);
+    }
+    assert!(
+        positive > le.len() / 2,
+        "gamma is zero on {} of {} lines",
+        le.len() - positive,
+        le.len()
+    );
+    // F(2, 4) against chi-square(2)/2 at these levels: the radii grow well over 1.5x
+    assert_eq!(wider, le.len());
+    let report = std::fs::read_to_string(dir.join("estimated").join("report.md")).unwrap();
+    assert!(report.contains("F(2, 4) radii"), "{report}");
+    let report = std::fs::read_to_string(dir.join("exact").join("report.md")).unwrap();
+    assert!(report.contains("taken as exact"), "{report}");
 }

@@ -24,7 +24,7 @@ pub(crate) fn first_order(p: C64, omega: f64, ts: Option<f64>) -> (C64, C64) {
             let x = p * t;
             let zp = x.exp();
             // num = (e^x - 1) / p and its derivative, by series for small |x|
-            let (num, dnum) = if x.norm() < 1e-3 {
+            let (num, dnum) = if x.norm_sqr() < 1e-6 {
                 (
                     t * (1.0 + x / 2.0 + x * x / 6.0 + x * x * x / 24.0),
                     t * t * (0.5 + x / 3.0 + x * x / 8.0 + x * x * x / 30.0),
@@ -34,6 +34,35 @@ pub(crate) fn first_order(p: C64, omega: f64, ts: Option<f64>) -> (C64, C64) {
             };
             let d = (z - zp).inv();
             (num * d, dnum * d + num * t * zp * d * d)
+        }
+    }
+}
+
+/// `first_order` of a pole `p` and of its conjugate at `omega`, sharing the work: the
+/// hold's `z = e^{j w T}` once, and `e^{conj(p) T} = conj(e^{p T})`.
+#[inline]
+pub(crate) fn first_order_pair(p: C64, omega: f64, ts: Option<f64>) -> [(C64, C64); 2] {
+    match ts {
+        None => {
+            let jw = C64::new(0.0, omega);
+            let h = (jw - p).inv();
+            let hc = (jw - p.conj()).inv();
+            [(h, h * h), (hc, hc * hc)]
+        }
+        Some(t) => {
+            let z = C64::from_polar(1.0, omega * t);
+            let x = p * t;
+            if x.norm_sqr() < 1e-6 {
+                return [first_order(p, omega, ts), first_order(p.conj(), omega, ts)];
+            }
+            let zp = x.exp();
+            let one = |p: C64, zp: C64| {
+                let num = (zp - 1.0) / p;
+                let dnum = (t * zp * p - (zp - 1.0)) / (p * p);
+                let d = (z - zp).inv();
+                (num * d, dnum * d + num * t * zp * d * d)
+            };
+            [one(p, zp), one(p.conj(), zp.conj())]
         }
     }
 }
@@ -141,6 +170,19 @@ mod tests {
             let v = r * h + r.conj() * hc + 0.3 * rb[0] + 2.0 * rb[1] - 0.7 * rb[2];
             let e = g.get(k, 0, 0);
             assert!((v - e).norm() <= 1e-10 * e.norm(), "{v} vs {e}");
+        }
+    }
+
+    #[test]
+    fn pair_terms_equal_the_single_ones() {
+        for ts in [None, Some(1e-4)] {
+            for p in [C64::new(-20.0, 600.0), C64::new(-1e-3, 2.0)] {
+                let [a, b] = first_order_pair(p, 640.0, ts);
+                let (c, d) = (first_order(p, 640.0, ts), first_order(p.conj(), 640.0, ts));
+                for (u, v) in [(a.0, c.0), (a.1, c.1), (b.0, d.0), (b.1, d.1)] {
+                    assert!((u - v).norm() <= 1e-13 * v.norm(), "{ts:?} {p}: {u} vs {v}");
+                }
+            }
         }
     }
 

@@ -19,6 +19,7 @@
 
 mod basis;
 pub mod error;
+mod gram;
 pub mod jacobian;
 pub mod lm;
 mod qr;

@@ -158,6 +158,12 @@ pub struct MlReport {
     /// Start frequencies (Hz) of the modes the refinement added.
     #[serde(default)]
     pub added_modes_hz: Vec<f64>,
+    /// Cost evaluations (trial points) of all runs of the iterations.
+    #[serde(default)]
+    pub evaluations: usize,
+    /// Jacobian factorisations of all runs of the iterations.
+    #[serde(default)]
+    pub jacobians: usize,
 }
 
 /// The maximum-likelihood refiner (Gauss-Newton / Levenberg-Marquardt with variable
@@ -399,10 +405,12 @@ impl Estimator for MlRefine {
             &prob,
             theta,
             eval0,
+            (n * m) as f64 - n_params as f64 / 2.0,
             &cfg.lm,
             valid(lay.n_pairs),
             &cfg.progress,
         );
+        let mut work = out.work;
         let mut prob = prob;
         let mut lay = lay;
         let mut n_params = n_params;
@@ -444,15 +452,17 @@ impl Estimator for MlRefine {
             let Ok(ev2) = prob2.evaluate(&theta2) else {
                 break;
             };
+            let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
             let out2 = iterate(
                 &prob2,
                 theta2,
                 ev2,
+                dof2,
                 &cfg.lm,
                 valid(lay2.n_pairs),
                 &cfg.progress,
             );
-            let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
+            work = work.add(out2.work);
             let f_stat = ((out.eval.cost - out2.eval.cost) / ((n_params2 - n_params) as f64 / 2.0))
                 / (out2.eval.cost / dof2);
             if f_stat.is_nan() || f_stat <= cfg.min_f || !out2.convergence.is_converged() {
@@ -616,6 +626,8 @@ impl Estimator for MlRefine {
             delay_s,
             delay_s_std,
             added_modes_hz: added,
+            evaluations: work.evaluations,
+            jacobians: work.jacobians,
         };
         let mut fit = Fit {
             model: fitted,
@@ -631,6 +643,8 @@ impl Estimator for MlRefine {
             messages,
         };
         fit.push_timing("iterations", iter_time);
+        fit.push_timing("evaluations", work.evaluation_time);
+        fit.push_timing("jacobians", work.jacobian_time);
         fit.push_timing("total", t0.elapsed());
         if let Convergence::Failed { .. } = fit.convergence {
             fit.messages

@@ -5,22 +5,48 @@
 //! run on the few nonlinear parameters only (Golub and Pereyra; the Jacobian of the
 //! reduced problem in Kaufman's form, `J = (I - P_A) dA/dtheta c`).
 //!
-//! Each entry's problem is factorised once per evaluation by a Householder QR of
-//! `[A_e | dA_e c_e | y_e]` (rows: real and imaginary parts of every line, weighted by
-//! `sqrt(2 w)`): the lower-right block of its `R` is the `R` factor of the projected
-//! Jacobian and residual of that entry, and the blocks of all entries are merged by one
-//! more QR. The work is linear in lines and in entries, and no normal equations are
-//! formed. With the full Jacobian `[J_nl | blockdiag(A_e)]`, the Schur complement of
+//! Each entry's linear problem `[A_e | y_e]` (rows: real and imaginary parts of every
+//! line, weighted by `sqrt(2 w)`) is solved per evaluation, and `[A_e | dA_e c_e | y_e]`
+//! is factorised per Jacobian: the lower-right block of its `R` is the `R` factor of
+//! the projected Jacobian and residual of that entry, and the blocks of all entries are
+//! merged by one more QR. The work is linear in lines and in entries. Both per-entry
+//! factorisations go through the column-scaled Gram matrix where that is accurate
+//! (scaled pivots above [`GRAM_MIN_PIVOT`], the evaluation with one step of iterative
+//! refinement on the explicit residual: see [`crate::gram`]) and through a Householder
+//! QR otherwise; on the wafer stage this makes an iteration several times cheaper than
+//! the QR alone, at the same estimates. With the full Jacobian `[J_nl | blockdiag(A_e)]`, the Schur complement of
 //! the linear block is exactly `sum_e J_e^T J_e`: the inverse of the merged `R^T R` is the
 //! marginal covariance of the nonlinear parameters (McKelvey eq. (31)-(32) with the
 //! measured variance as the fixed noise model).
 
-use crate::basis::{first_order, powers, rigid_bases, zoh_ts};
+use crate::basis::{first_order, first_order_pair, powers, rigid_bases, zoh_ts};
+use crate::gram::{gram_lstsq, gram_r, gram_r_with};
 use crate::qr::{back_substitute, householder_r};
 use crate::C64;
 use rayon::prelude::*;
 use realize::{FrfModel, PolePair, RealPole};
 use serde::{Deserialize, Serialize};
+
+/// Smallest scaled pivot of `[A_e | J_e]` for the Gram path of
+/// [`Problem::jacobian_r`] (relative error of the information matrix about
+/// `k eps / 1e-8`, `k` columns); a smaller one runs the QR.
+const GRAM_MIN_PIVOT: f64 = 1e-4;
+/// Smallest residual norm relative to the data norm of an entry for the Gram path: the
+/// Gauss-Newton right-hand side from the Gram matrix has an absolute error of about
+/// `k eps ||y||`, so an entry fitted closer (noise-free data near the optimum) runs
+/// the QR.
+const GRAM_MIN_RESIDUAL: f64 = 1e-9;
+
+/// The column-major copy of the row-major `rows x cols` matrix `a`.
+fn col_major(a: &[f64], rows: usize, cols: usize) -> Vec<f64> {
+    let mut out = vec![0.0; rows * cols];
+    for (i, row) in a.chunks_exact(cols).enumerate() {
+        for (j, &x) in row.iter().enumerate() {
+            out[j * rows + i] = x;
+        }
+    }
+    out
+}
 
 /// How the residues of a pole pair are parametrised.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -129,6 +155,11 @@ pub(crate) struct Eval {
     pub cost: f64,
     /// Linear parameters, `m x n_lin`, entry-major.
     pub coef: Vec<f64>,
+    /// The cost of each entry.
+    pub entry_cost: Vec<f64>,
+    /// Per entry, the Gram matrix of `[A_e | y_e]` when the evaluation went through it
+    /// (the Jacobian at the same point reuses it).
+    pub gram: Vec<Option<Vec<f64>>>,
 }
 
 /// A linear problem without a unique solution (a basis column of entry `entry` is in
@@ -187,25 +218,29 @@ impl Problem {
         f
     }
 
-    fn lines(&self, theta: &[f64]) -> Lines {
+    /// `F phi`, `F d phi / d (Re p, Im p)` and `F d phi / d p` (see [`Lines`]) for the
+    /// lines `range`.
+    fn line_terms(
+        &self,
+        theta: &[f64],
+        f: &realize::KnownFactors,
+        range: std::ops::Range<usize>,
+    ) -> (Vec<C64>, Vec<C64>, Vec<C64>) {
         let lay = &self.lay;
-        let (n, n_lc, cpp, np) = (self.n_lines(), lay.n_lc(), lay.cpp(), lay.n_pairs);
-        let f = self.factors(theta);
-        let nd = f.dynamics.len();
+        let (n_lc, cpp, np) = (lay.n_lc(), lay.cpp(), lay.n_pairs);
+        let n = range.len();
         let mut fphi = vec![C64::new(0.0, 0.0); n * n_lc];
         let mut dpair = vec![C64::new(0.0, 0.0); n * np * 2 * cpp];
         let mut dreal = vec![C64::new(0.0, 0.0); n * lay.n_real];
-        let mut dynv = Vec::with_capacity(n * nd);
-        let mut dynx: Vec<Vec<C64>> = vec![Vec::new(); nd];
         let j = C64::new(0.0, 1.0);
-        for (k, &w) in self.omega.iter().enumerate() {
+        for (k, kk) in range.enumerate() {
+            let w = self.omega[kk];
             let fs = f.scalar_at(w);
             let row = &mut fphi[k * n_lc..(k + 1) * n_lc];
             let mut col = 0;
             for q in 0..np {
                 let p = C64::new(theta[2 * q], theta[2 * q + 1]);
-                let (h, dh) = first_order(p, w, self.ts);
-                let (hc, dhc) = first_order(p.conj(), w, self.ts);
+                let [(h, dh), (hc, dhc)] = first_order_pair(p, w, self.ts);
                 let base = (k * np + q) * 2 * cpp;
                 if lay.const_num {
                     let b = p.im;
@@ -232,12 +267,37 @@ impl Problem {
                 col += 1;
             }
             for l in 0..lay.n_rigid {
-                row[col] = fs * self.rigid[k * lay.n_rigid + l];
+                row[col] = fs * self.rigid[kk * lay.n_rigid + l];
                 col += 1;
             }
             if lay.feedthrough {
                 row[col] = fs;
             }
+        }
+        (fphi, dpair, dreal)
+    }
+
+    fn lines(&self, theta: &[f64]) -> Lines {
+        let n = self.n_lines();
+        let f = self.factors(theta);
+        let nd = f.dynamics.len();
+        // the lines in chunks on the rayon pool
+        let chunk = n.div_ceil(8).max(64);
+        let parts: Vec<_> = (0..n.div_ceil(chunk))
+            .into_par_iter()
+            .map(|c| self.line_terms(theta, &f, c * chunk..((c + 1) * chunk).min(n)))
+            .collect();
+        let mut fphi = Vec::new();
+        let mut dpair = Vec::new();
+        let mut dreal = Vec::new();
+        for (a, b, c) in parts {
+            fphi.extend(a);
+            dpair.extend(b);
+            dreal.extend(c);
+        }
+        let mut dynv = Vec::with_capacity(n * nd);
+        let mut dynx: Vec<Vec<C64>> = vec![Vec::new(); nd];
+        for &w in &self.omega {
             for (di, d) in f.dynamics.iter().enumerate() {
                 dynv.push((d.at(w), d.den_at(w)));
                 let x = C64::new(0.0, w / d.scale);
@@ -268,27 +328,28 @@ impl Problem {
         v
     }
 
-    /// Writes the weighted basis of entry `e` (`2N x n_lin`, column-major with
-    /// `rows = 2N`) into `a[..]` and the weighted data into column `ycol`.
-    fn fill_basis(&self, lines: &Lines, e: usize, a: &mut [f64], ycol: usize) {
+    /// Writes the weighted basis of entry `e` (`2N x n_lin`) into the first columns of
+    /// the row-major `2N x cols` matrix `a` (rows `2k` and `2k + 1`: the real and
+    /// imaginary parts of line `k`) and the weighted data into column `ycol`.
+    fn fill_basis(&self, lines: &Lines, e: usize, a: &mut [f64], cols: usize, ycol: usize) {
         let lay = &self.lay;
         let (n, m, n_lc) = (self.n_lines(), lay.m(), lay.n_lc());
-        let rows = 2 * n;
         for k in 0..n {
             let s = self.sw[k * m + e];
             let d = self.dprod(lines, k, e, None) * s;
-            for l in 0..n_lc {
-                let v = d * lines.fphi[k * n_lc + l];
-                a[l * rows + 2 * k] = v.re;
-                a[l * rows + 2 * k + 1] = v.im;
+            let (re, im) = a[2 * k * cols..(2 * k + 2) * cols].split_at_mut(cols);
+            for (l, f) in lines.fphi[k * n_lc..(k + 1) * n_lc].iter().enumerate() {
+                let v = d * f;
+                re[l] = v.re;
+                im[l] = v.im;
             }
             if lay.crosstalk {
-                a[n_lc * rows + 2 * k] = d.re;
-                a[n_lc * rows + 2 * k + 1] = d.im;
+                re[n_lc] = d.re;
+                im[n_lc] = d.im;
             }
             let y = self.g[k * m + e] * s;
-            a[ycol * rows + 2 * k] = y.re;
-            a[ycol * rows + 2 * k + 1] = y.im;
+            re[ycol] = y.re;
+            im[ycol] = y.im;
         }
     }
 
@@ -299,12 +360,20 @@ impl Problem {
         let lay = &self.lay;
         let (m, n_lin) = (lay.m(), lay.n_lin());
         let rows = 2 * self.n_lines();
-        let per: Vec<Result<(f64, Vec<f64>), Singular>> = (0..m)
+        let cols = n_lin + 1;
+        type PerEntry = Result<(f64, Vec<f64>, Option<Vec<f64>>), Singular>;
+        let per: Vec<PerEntry> = (0..m)
             .into_par_iter()
-            .map(|e| {
-                let cols = n_lin + 1;
-                let mut a = vec![0.0; rows * cols];
-                self.fill_basis(&lines, e, &mut a, n_lin);
+            .map_init(Vec::new, |buf: &mut Vec<f64>, e| {
+                // every element is written: a reused buffer needs no clearing
+                buf.resize(rows * cols, 0.0);
+                let a = &mut buf[..];
+                self.fill_basis(&lines, e, a, cols, n_lin);
+                if let Some((c, rr, g)) = gram_lstsq(a, rows, n_lin, GRAM_MIN_PIVOT) {
+                    return Ok((0.5 * rr, c, Some(g)));
+                }
+                // nearly dependent columns: the QR, which also names a singular one
+                let mut a = col_major(a, rows, cols);
                 let norms: Vec<f64> = (0..n_lin)
                     .map(|l| {
                         a[l * rows..(l + 1) * rows]
@@ -329,17 +398,26 @@ impl Problem {
                 let mut c: Vec<f64> = (0..n_lin).map(|i| a[n_lin * rows + i]).collect();
                 back_substitute(&a, rows, 0, n_lin, &mut c);
                 let rr = a[n_lin * rows + n_lin];
-                Ok((0.5 * rr * rr, c))
+                Ok((0.5 * rr * rr, c, None))
             })
             .collect();
         let mut cost = 0.0;
         let mut coef = Vec::with_capacity(m * n_lin);
+        let mut entry_cost = Vec::with_capacity(m);
+        let mut gram = Vec::with_capacity(m);
         for r in per {
-            let (c2, c) = r?;
+            let (c2, c, g) = r?;
             cost += c2;
+            entry_cost.push(c2);
             coef.extend(c);
+            gram.push(g);
         }
-        Ok(Eval { cost, coef })
+        Ok(Eval {
+            cost,
+            coef,
+            entry_cost,
+            gram,
+        })
     }
 
     /// The `R` factor (`(n_nl + 1)^2`, column-major) of the projected Jacobian and
@@ -355,21 +433,24 @@ impl Problem {
         let rows = 2 * n;
         let nb = n_nl + 1;
         let f = self.factors(theta);
+        let cols = n_lin + n_nl + 1;
         let blocks: Vec<(Vec<f64>, Vec<f64>)> = (0..m)
             .into_par_iter()
-            .map(|e| {
-                let cols = n_lin + n_nl + 1;
-                let mut a = vec![0.0; rows * cols];
+            .map_init(Vec::new, |buf: &mut Vec<f64>, e| {
+                // every element is written: a reused buffer needs no clearing
+                buf.resize(rows * cols, 0.0);
+                let a = &mut buf[..];
                 let ycol = n_lin + n_nl;
-                self.fill_basis(&lines, e, &mut a, ycol);
+                self.fill_basis(&lines, e, a, cols, ycol);
                 let c = &ev.coef[e * n_lin..(e + 1) * n_lin];
                 let (i_out, j_in) = (e % lay.ny, e / lay.ny);
                 for k in 0..n {
                     let s = self.sw[k * m + e];
                     let d = self.dprod(&lines, k, e, None) * s;
+                    let (re, im) = a[2 * k * cols..(2 * k + 2) * cols].split_at_mut(cols);
                     let mut put = |col: usize, v: C64| {
-                        a[(n_lin + col) * rows + 2 * k] = v.re;
-                        a[(n_lin + col) * rows + 2 * k + 1] = v.im;
+                        re[n_lin + col] = v.re;
+                        im[n_lin + col] = v.im;
                     };
                     for q in 0..np {
                         for ab in 0..2 {
@@ -410,25 +491,45 @@ impl Problem {
                                 for ci in 0..nnum {
                                     put(col + nden + ci, rest * xs[ci] / ad);
                                 }
+                            } else {
+                                for ci in 0..nden + nnum {
+                                    put(col + ci, C64::new(0.0, 0.0));
+                                }
                             }
                             col += nden + nnum;
                         }
                     }
                 }
-                let vn: Vec<f64> = (0..n_nl)
-                    .map(|c| {
-                        a[(n_lin + c) * rows..(n_lin + c + 1) * rows]
-                            .iter()
-                            .map(|x| x * x)
-                            .sum()
-                    })
-                    .collect();
-                householder_r(&mut a, rows, cols);
-                // the lower-right block: R of the projected [J | r]
+                let mut vn = vec![0.0; n_nl];
+                let mut y2 = 0.0;
+                for row in a.chunks_exact(cols) {
+                    for (acc, x) in vn.iter_mut().zip(&row[n_lin..ycol]) {
+                        *acc += x * x;
+                    }
+                    y2 += row[ycol] * row[ycol];
+                }
+                // the lower-right block: R of the projected [J | r], from the Gram
+                // matrix while that is accurate (see `crate::gram`), by QR otherwise
                 let mut b = vec![0.0; nb * nb];
-                for cj in 0..nb {
-                    for ri in 0..=cj.min(rows.saturating_sub(n_lin + 1)) {
-                        b[cj * nb + ri] = a[(n_lin + cj) * rows + n_lin + ri];
+                let gram = (2.0 * ev.entry_cost[e] > GRAM_MIN_RESIDUAL * GRAM_MIN_RESIDUAL * y2)
+                    .then(|| match &ev.gram[e] {
+                        Some(gb) => gram_r_with(a, rows, cols, n_lin, gb, GRAM_MIN_PIVOT),
+                        None => gram_r(a, rows, cols, GRAM_MIN_PIVOT),
+                    })
+                    .flatten();
+                if let Some(g) = gram {
+                    for cj in 0..nb {
+                        for ri in 0..=cj {
+                            b[cj * nb + ri] = g[(n_lin + cj) * cols + n_lin + ri];
+                        }
+                    }
+                } else {
+                    let mut a = col_major(a, rows, cols);
+                    householder_r(&mut a, rows, cols);
+                    for cj in 0..nb {
+                        for ri in 0..=cj.min(rows.saturating_sub(n_lin + 1)) {
+                            b[cj * nb + ri] = a[(n_lin + cj) * rows + n_lin + ri];
+                        }
                     }
                 }
                 (b, vn)

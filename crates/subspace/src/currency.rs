@@ -49,6 +49,9 @@ pub struct PoleSet {
     pub reflected: Vec<ReflectedPole>,
     /// Notes (eigenvalues that have no continuous image).
     pub notes: Vec<String>,
+    /// For every pole pair, the eigenvalues (upper, continuous) merged into it (one
+    /// for a pole that was not merged).
+    pub pair_members: Vec<Vec<C64>>,
 }
 
 /// Classifies the eigenvalues `eig` of the identified `A` (see the module
@@ -56,9 +59,17 @@ pub struct PoleSet {
 /// `|s| < rigid_fraction * omega_min` are integrators, at most `max_integrators` of
 /// them in the rigid-body part. Poles within `merge_tol` (relative) of each other are
 /// one pole with a residue of higher rank (a minimal state space repeats a pole once
-/// per rank of its residue).
+/// per rank of its residue). `weight[i]` is the size `|C u_i|^2 |(U^-1 B)_i|^2` of the
+/// residue of eigenvalue `i` ([`eigen_weights`]); merged poles are averaged with these
+/// weights. A repeated pole of a residue of rank 2 is split by noise, and the
+/// eigenvalue of the weak direction of the residue is determined much less precisely
+/// than that of the strong one (its variance scales as the inverse squared residue):
+/// the plain mean moved the merged pole by half the split (0.1 % of a lightly damped
+/// mode's frequency at a relative noise of 1e-4, i.e. several percent of its
+/// half-power bandwidth), the weighted mean stays with the well-determined eigenvalue.
 pub fn classify(
     eig: &[C64],
+    weight: &[f64],
     variable: Variable,
     omega_min: f64,
     rigid_fraction: f64,
@@ -66,7 +77,13 @@ pub fn classify(
     merge_tol: f64,
 ) -> PoleSet {
     let mut ps = PoleSet::default();
-    for &l in eig {
+    let (mut pair_w, mut real_w) = (Vec::new(), Vec::new());
+    for (i, &l) in eig.iter().enumerate() {
+        let wi = weight
+            .get(i)
+            .copied()
+            .filter(|w| w.is_finite() && *w > 0.0)
+            .unwrap_or(1.0);
         let is_real_eig = l.im.abs() <= 1e-12 * l.norm();
         if let Variable::Shift { ts } = variable {
             if l.norm() == 0.0 || (is_real_eig && l.re < 0.0) {
@@ -100,17 +117,17 @@ pub fn classify(
             s.re = -s.re;
         }
         if is_real_eig {
-            ps.reals.push(s.re);
+            real_w.push((C64::new(s.re, 0.0), wi));
         } else {
-            ps.pairs.push(s);
+            pair_w.push((s, wi));
         }
     }
     ps.integrators = ps.at_origin.min(max_integrators);
-    ps.pairs.sort_by(|a, b| a.norm().total_cmp(&b.norm()));
-    ps.reals.sort_by(|a, b| b.total_cmp(a));
-    let (pairs, merged_p) = merge(&ps.pairs, merge_tol, |z| z);
-    let reals_c: Vec<C64> = ps.reals.iter().map(|&x| C64::new(x, 0.0)).collect();
-    let (reals, merged_r) = merge(&reals_c, merge_tol, |z| z);
+    pair_w.sort_by(|a, b| a.0.norm().total_cmp(&b.0.norm()));
+    real_w.sort_by(|a, b| b.0.re.total_cmp(&a.0.re));
+    let (pairs, pair_members, merged_p) = merge(&pair_w, merge_tol);
+    let (reals, _, merged_r) = merge(&real_w, merge_tol);
+    ps.pair_members = pair_members;
     if merged_p + merged_r > 0 {
         ps.notes.push(format!(
             "{} repeated poles (a residue of rank > 1, or a pole split by noise; within {merge_tol:.0e} relative) merged: one residue matrix each",
@@ -122,25 +139,72 @@ pub fn classify(
     ps
 }
 
-/// Merges poles (sorted by modulus) closer than `tol` relative into their mean;
-/// returns the poles and how many were merged away.
-fn merge(poles: &[C64], tol: f64, f: impl Fn(C64) -> C64) -> (Vec<C64>, usize) {
-    let mut out: Vec<(C64, usize)> = Vec::new();
+/// Merges poles (sorted by modulus) closer than `tol` relative to a group's weighted
+/// mean into that mean (weights: the residue sizes, see [`classify`]); returns the
+/// poles and how many were merged away.
+fn merge(poles: &[(C64, f64)], tol: f64) -> (Vec<C64>, Vec<Vec<C64>>, usize) {
+    // (weighted sum, weight sum, members)
+    let mut out: Vec<(C64, f64, Vec<C64>)> = Vec::new();
     let mut merged = 0;
-    for &p in poles {
-        let p = f(p);
+    for &(p, w) in poles {
         if let Some(last) = out
             .iter_mut()
-            .find(|(q, c)| ((*q / *c as f64) - p).norm() <= tol * p.norm())
+            .find(|(q, c, _)| ((*q / *c) - p).norm() <= tol * p.norm())
         {
-            last.0 += p;
-            last.1 += 1;
+            last.0 += p * w;
+            last.1 += w;
+            last.2.push(p);
             merged += 1;
         } else {
-            out.push((p, 1));
+            out.push((p * w, w, vec![p]));
         }
     }
-    (out.into_iter().map(|(s, c)| s / c as f64).collect(), merged)
+    let poles = out.iter().map(|(s, c, _)| s / c).collect();
+    let members = out.into_iter().map(|(_, _, m)| m).collect();
+    (poles, members, merged)
+}
+
+/// The eigenvalues of `A` and the sizes of their residues in `C (xi I - A)^-1 B`:
+/// with `A = U diag(l) U^-1`, the residue of `l_i` is `(C u_i)(U^-1 B)_i`, of size
+/// `|C u_i|^2 |(U^-1 B)_i|^2`. Falls back to unit weights when the eigenvectors are
+/// singular (a defective `A`).
+pub fn eigen_weights(
+    a: &Mat<f64>,
+    b: &Mat<f64>,
+    c: &Mat<f64>,
+) -> Result<(Vec<C64>, Vec<f64>), SubspaceError> {
+    use faer::linalg::solvers::Solve;
+    let n = a.nrows();
+    let e = a
+        .eigen()
+        .map_err(|e| SubspaceError::numerical("eigendecomposition of A", format!("{e:?}")))?;
+    let s = e.S().column_vector();
+    let eig: Vec<C64> = (0..n).map(|i| C64::new(s[i].re, s[i].im)).collect();
+    if eig.iter().any(|z| !(z.re.is_finite() && z.im.is_finite())) {
+        return Err(SubspaceError::numerical(
+            "eigenvalues of A",
+            "non-finite eigenvalues",
+        ));
+    }
+    let u = e.U().to_owned();
+    let bc = Mat::from_fn(n, b.ncols(), |i, j| faer::c64::new(b[(i, j)], 0.0));
+    let x = u.partial_piv_lu().solve(&bc);
+    let weight: Vec<f64> = (0..n)
+        .map(|i| {
+            let cu: f64 = (0..c.nrows())
+                .map(|o| {
+                    (0..n)
+                        .map(|l| u[(l, i)] * c[(o, l)])
+                        .fold(faer::c64::new(0.0, 0.0), |acc, v| acc + v)
+                        .norm_sqr()
+                })
+                .sum();
+            let xb: f64 = (0..b.ncols()).map(|j| x[(i, j)].norm_sqr()).sum();
+            cu * xb
+        })
+        .collect();
+    let ok = weight.iter().all(|w| w.is_finite() && *w > 0.0);
+    Ok((eig, if ok { weight } else { vec![1.0; n] }))
 }
 
 /// One basis term of the currency: which coefficient it multiplies.
@@ -179,6 +243,43 @@ fn unit_model(ps: &PoleSet, term: Term) -> ModalModel {
     m
 }
 
+/// The linear terms of the residue fit of `ps`, in the order of [`residue_basis`].
+fn terms_of(ps: &PoleSet) -> Vec<Term> {
+    let mut terms = Vec::new();
+    for q in 0..ps.pairs.len() {
+        terms.push(Term::PairRe(q));
+        terms.push(Term::PairIm(q));
+    }
+    terms.extend((0..ps.reals.len()).map(Term::Real));
+    terms.extend((0..ps.integrators).map(Term::Rigid));
+    terms.push(Term::Feedthrough);
+    terms
+}
+
+/// The basis of the residue fit of [`fit_residues`]: the currency's own response
+/// (with `factors`) at `omega` of each unit term (the real and the imaginary part of
+/// the residue of every pair, every real pole, every integrator, the feedthrough).
+pub fn residue_basis(
+    ps: &PoleSet,
+    factors: &KnownFactors,
+    omega: &[f64],
+) -> Result<Vec<Vec<C64>>, SubspaceError> {
+    let terms = terms_of(ps);
+    let mut basis = Vec::with_capacity(terms.len());
+    for &t in &terms {
+        let fm = FrfModel {
+            modal: unit_model(ps, t),
+            factors: KnownFactors {
+                dynamics: Vec::new(),
+                crosstalk: None,
+                ..factors.clone()
+            },
+        };
+        basis.push(fm.freq_response(omega)?.values);
+    }
+    Ok(basis)
+}
+
 /// Fits the residues, rigid-body coefficients and feedthrough of the poles `ps` to the
 /// data `g` (line after line, each `vec(G)`) at `omega` with weights `w` (same layout),
 /// through the currency's response with `factors`. Returns the model and the worst
@@ -192,14 +293,7 @@ pub fn fit_residues(
     ps: &PoleSet,
     factors: &KnownFactors,
 ) -> Result<(FrfModel, f64), SubspaceError> {
-    let mut terms = Vec::new();
-    for q in 0..ps.pairs.len() {
-        terms.push(Term::PairRe(q));
-        terms.push(Term::PairIm(q));
-    }
-    terms.extend((0..ps.reals.len()).map(Term::Real));
-    terms.extend((0..ps.integrators).map(Term::Rigid));
-    terms.push(Term::Feedthrough);
+    let terms = terms_of(ps);
     let (nl, nb, m) = (omega.len(), terms.len(), ny * nu);
     if 2 * nl < nb {
         return Err(SubspaceError::TooFewLines {
@@ -210,19 +304,7 @@ pub fn fit_residues(
             needed: nb.div_ceil(2),
         });
     }
-    // basis columns: the currency's own response of each unit term (1 x 1)
-    let mut basis = Vec::with_capacity(nb);
-    for &t in &terms {
-        let fm = FrfModel {
-            modal: unit_model(ps, t),
-            factors: KnownFactors {
-                dynamics: Vec::new(),
-                crosstalk: None,
-                ..factors.clone()
-            },
-        };
-        basis.push(fm.freq_response(omega)?.values);
-    }
+    let basis = residue_basis(ps, factors, omega)?;
     let mut modal = ModalModel::new(ny, nu);
     modal.pairs = ps
         .pairs

@@ -1,13 +1,18 @@
 //! [`SubspaceInit`]: the frequency-domain subspace fit as an initialiser of the
 //! estimator chain (`--init subspace`).
 
-use crate::currency::{classify, fit_residues, ReflectedPole};
-use crate::order::{largest_gap, numerical_rank, RANK_TOL};
+use crate::currency::{classify, eigen_weights, fit_residues, PoleSet, ReflectedPole};
+use crate::delay_refine::{
+    self, huber, line_residuals, DelayCost, DelayPass, DelayRefinement, RotatedCost,
+};
+use crate::order::{
+    f_critical, f_statistic, f_sweep, largest_gap, numerical_rank, OrderRule, OrderScore,
+    SweepSettings, RANK_TOL,
+};
 use crate::prepare::{prepare, Variable};
 use crate::projection::project;
 use crate::realization::{bilinear_to_continuous, fit_b_d, shift_a_c};
 use crate::SubspaceError;
-use faer::Mat;
 use frf_data::chain::weighted_cost;
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
 use frf_data::{Convergence, DelayChoice, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
@@ -29,6 +34,24 @@ pub struct SubspaceConfig {
     pub delay: DelayChoice,
     /// Delay estimator settings. Default: [`DelayConfig::default`].
     pub delay_config: DelayConfig,
+    /// Refine a free delay (`Auto` or `Start`) inside the initialiser (see
+    /// [`crate::delay_refine`]): with the subspace poles fixed the residue refit is
+    /// linear, its cost a function of the delay alone, minimised around the start;
+    /// when the delay moved by more than `delay_tol_rad`, the subspace step is repeated
+    /// with the refined delay divided out. The model of the lowest cost is kept.
+    /// Default: true.
+    pub refine_delay: bool,
+    /// Most subspace steps of the delay refinement (the first included). Default: 3.
+    pub delay_passes: usize,
+    /// Half-width of the delay search bracket around each pass's start, seconds;
+    /// `None`: a tenth of the period of the highest line (a phase of +-0.63 rad there;
+    /// 50 us for a band ending at 2 kHz). Default: `None`.
+    pub delay_half_width: Option<f64>,
+    /// Points of the scan of the bracket before the slope's zero is found. Default: 21.
+    pub delay_grid: usize,
+    /// The subspace step is repeated when the delay moved by more than this phase at
+    /// the highest line, rad. Default: 1e-4.
+    pub delay_tol_rad: f64,
     /// `k` of `(j w)^k`: 0 displacement (default), 1 velocity, 2 accelerance data.
     pub derivative_order: u32,
     /// Weighting: [`Weighting::Uniform`] runs the unweighted algorithm; any other
@@ -42,6 +65,27 @@ pub struct SubspaceConfig {
     pub order: Option<usize>,
     /// Largest order considered when it is chosen from the data. Default: 60.
     pub max_order: usize,
+    /// How the order is chosen when it is not given, and whether the significance tests
+    /// run (see [`OrderRule`]). Default: [`OrderRule::Auto`] (the order from the
+    /// singular values; the rigid-body integrators F-tested when the weighting is the
+    /// data's inverse variance).
+    pub order_rule: OrderRule,
+    /// Significance level of the order F test (the diagnosis's and the SK sweep's
+    /// default). Default: 1e-3.
+    pub order_alpha: f64,
+    /// Practical-significance floor of the F statistics of the order sweep and the
+    /// integrator test (the diagnosis's `min_f`: measured noise is heavier-tailed than
+    /// Gaussian, and a state placed by the subspace step absorbs the misfit of the other
+    /// subspace poles, which are not maximum-likelihood estimates; such states reach F
+    /// of 2..10, real ones 1e3 and more). Default: 25.
+    pub order_min_f: f64,
+    /// The F-test sweep starts this many orders below the singular-value proposal.
+    /// Default: 4.
+    pub sweep_below: usize,
+    /// The sweep stops after this many consecutive orders that are not kept (a mode
+    /// with a rank-2 residue adds four states; one state of a pair alone may not be
+    /// significant). Default: 4.
+    pub sweep_patience: usize,
     /// Block rows `r` of the data equation (6); `None`: `2 ceil(n_max / p) + 1` with
     /// `n_max` the given order or `max_order` (about twice what (12) needs: more rows
     /// average the noise better; on the reference wafer stage the median error falls
@@ -74,10 +118,20 @@ impl Default for SubspaceConfig {
             hold: Hold::None,
             delay: DelayChoice::Auto,
             delay_config: DelayConfig::default(),
+            refine_delay: true,
+            delay_passes: 3,
+            delay_half_width: None,
+            delay_grid: 21,
+            delay_tol_rad: 1e-4,
             derivative_order: 0,
             weighting: Weighting::Auto,
             order: None,
             max_order: 60,
+            order_rule: OrderRule::Auto,
+            order_alpha: 1e-3,
+            order_min_f: 25.0,
+            sweep_below: 4,
+            sweep_patience: 4,
             block_rows: None,
             rigid_fraction: 0.75,
             max_integrators: 2,
@@ -117,8 +171,14 @@ pub struct SubspaceReport {
     pub rank: usize,
     /// The order (states) of the state space.
     pub order: usize,
-    /// How it was chosen: `given` or `largest gap` (with the gap as a ratio).
+    /// How it was chosen: `given`, the singular-value rule (threshold or largest gap,
+    /// with the values), or the F test (with its range and the statistic of the first
+    /// order not kept after the chosen one).
     pub order_rule: String,
+    /// The F-test sweep (empty when it did not run): cost, F statistic and critical
+    /// value of every candidate order.
+    #[serde(default)]
+    pub order_sweep: Vec<OrderScore>,
     /// Condition numbers.
     pub conditioning: Conditioning,
     /// Poles reflected into the stable region.
@@ -133,8 +193,13 @@ pub struct SubspaceReport {
     pub real_poles: usize,
     /// The delay estimate, when the delay was estimated.
     pub delay_estimate: Option<DelayEstimate>,
-    /// The delay divided out, seconds (beyond the hold).
+    /// The delay divided out before the subspace step of the state space returned,
+    /// seconds (beyond the hold). The model's own delay (`factors.delay_s`) is the
+    /// refined one when the delay was refined.
     pub delay_s: f64,
+    /// The delay refinement (see [`crate::delay_refine`]), when it ran.
+    #[serde(default)]
+    pub delay_refinement: Option<DelayRefinement>,
     /// Weighted cost of the state space of (17) on the data.
     pub state_space_cost: f64,
     /// Weighted cost of the currency model (residues refitted) on the data.
@@ -201,6 +266,36 @@ impl SubspaceInit {
                 "must be finite and > 0",
             ));
         }
+        if !(c.order_alpha.is_finite() && c.order_alpha > 0.0 && c.order_alpha < 0.5) {
+            return Err(SubspaceError::invalid(
+                "order_alpha",
+                c.order_alpha,
+                "the significance level must be in (0, 0.5)",
+            ));
+        }
+        if !(c.order_min_f.is_finite() && c.order_min_f >= 0.0) {
+            return Err(SubspaceError::invalid(
+                "order_min_f",
+                c.order_min_f,
+                "must be finite and >= 0",
+            ));
+        }
+        if let Some(h) = c.delay_half_width {
+            if !(h.is_finite() && h > 0.0) {
+                return Err(SubspaceError::invalid(
+                    "delay_half_width (s)",
+                    h,
+                    "must be finite and > 0",
+                ));
+            }
+        }
+        if !(c.delay_tol_rad.is_finite() && c.delay_tol_rad >= 0.0) {
+            return Err(SubspaceError::invalid(
+                "delay_tol_rad",
+                c.delay_tol_rad,
+                "must be finite and >= 0",
+            ));
+        }
         if c.order.is_none() && c.max_order == 0 {
             return Err(SubspaceError::invalid("max_order", 0, "must be >= 1"));
         }
@@ -221,7 +316,7 @@ impl SubspaceInit {
         let t0 = Instant::now();
         let mut timings = Vec::new();
         let mut messages = Vec::new();
-        let (ny, nu, nl) = (data.ny(), data.nu(), data.n_lines());
+        let nl = data.n_lines();
         let band = if nl > 0 {
             (data.freq_hz(0), data.freq_hz(nl - 1))
         } else {
@@ -255,7 +350,7 @@ impl SubspaceInit {
                 timings.push(("delay".to_string(), t.elapsed().as_secs_f64()));
                 let tau = est.tau_s - hold_share;
                 messages.push(format!(
-                    "delay estimate {:.2} us (coherence {:.2}), {:.2} us divided out beyond the hold; a refiner refines it",
+                    "delay estimate {:.2} us (coherence {:.2}), {:.2} us divided out beyond the hold",
                     est.tau_s * 1e6,
                     est.coherence,
                     tau * 1e6
@@ -271,6 +366,188 @@ impl SubspaceInit {
                 "must be finite",
             ));
         }
+        let first = self.subspace_step(
+            data,
+            delay_s,
+            fitted,
+            delay_estimate,
+            messages.clone(),
+            timings,
+        )?;
+        self.refine_delay(data, first, delay_s, fitted, &messages, t0)
+    }
+
+    /// The delay refinement of a free delay (`Auto`, `Start`; see
+    /// [`crate::delay_refine`]): with the poles of the subspace step fixed, the delay
+    /// minimising the residue-refit cost in a bracket around the delay divided out;
+    /// when it moved by more than `delay_tol_rad` at the highest line, the subspace step
+    /// again with the refined delay divided out, and the delay refined with its poles;
+    /// at most `delay_passes` subspace steps. The pass of the lowest cost is returned,
+    /// its model with the refined delay (still a free parameter, `delay_fitted`, for a
+    /// refiner). Without a free delay, or with `refine_delay` off, `first` as it is.
+    fn refine_delay<D: FrfDataset + ?Sized>(
+        &self,
+        data: &D,
+        first: (Identified, PoleSet),
+        start: f64,
+        fitted: bool,
+        pre: &[String],
+        t0: Instant,
+    ) -> Result<Identified, SubspaceError> {
+        let cfg = &self.config;
+        let (mut cur, mut poles) = first;
+        if !(fitted && cfg.refine_delay && cfg.delay_passes > 0) {
+            cur.timings
+                .push(("total".to_string(), t0.elapsed().as_secs_f64()));
+            return Ok(cur);
+        }
+        let omega = data.omegas();
+        let g = data.values_vec();
+        let w = cfg.weighting.resolve(data).weights(data)?;
+        let w_max = omega.iter().copied().fold(0.0, f64::max);
+        let half_width = cfg
+            .delay_half_width
+            .unwrap_or(0.1 * std::f64::consts::TAU / w_max);
+        let tol = cfg.delay_tol_rad / w_max;
+        let mut passes: Vec<DelayPass> = Vec::new();
+        let mut notes = Vec::new();
+        let mut extra_timings = Vec::new();
+        let mut search_s = 0.0;
+        let mut best: Option<(Identified, usize, f64)> = None;
+        let mut tau_div = start;
+        let mut threshold = None;
+        for pass in 1..=cfg.delay_passes {
+            let ts = Instant::now();
+            let dc = DelayCost {
+                ny: data.ny(),
+                nu: data.nu(),
+                omega: &omega,
+                g: &g,
+                w: &w,
+                poles: &poles,
+                factors: &cur.model.factors,
+            };
+            let (rw, med_start) =
+                delay_refine::robust_weights(&cur.model, &omega, &g, &w, ROBUST_LINE_C)?;
+            // the threshold of the robust cost that compares the passes: fixed by the first
+            let thr = *threshold.get_or_insert(ROBUST_LINE_C * med_start);
+            let robust_start = huber(&line_residuals(&cur.model, &omega, &g, &w)?, thr);
+            let fast = RotatedCost::new(&dc, rw)?;
+            let min = delay_refine::minimise(|t| fast.at(t), tau_div, half_width, cfg.delay_grid);
+            let exact = dc.at(min.tau)?;
+            let robust_refined = huber(&line_residuals(&exact.model, &omega, &g, &w)?, thr);
+            search_s += ts.elapsed().as_secs_f64();
+            let rec = DelayPass {
+                divided_out_s: tau_div,
+                subspace_cost: cur.report.cost,
+                subspace_robust_cost: robust_start,
+                refined_s: min.tau,
+                refined_cost: exact.cost,
+                refined_robust_cost: robust_refined,
+                evaluations: min.evaluations,
+                at_edge: min.at_edge,
+            };
+            notes.push(format!(
+                "delay pass {pass}: {:.4} us divided out, cost {:.4e} (robust {:.4e}); with its poles fixed the robust residue refit is best at {:.4} us, cost {:.4e} (robust {:.4e}; {} evaluations{})",
+                rec.divided_out_s * 1e6,
+                rec.subspace_cost,
+                rec.subspace_robust_cost,
+                rec.refined_s * 1e6,
+                rec.refined_cost,
+                rec.refined_robust_cost,
+                rec.evaluations,
+                if rec.at_edge {
+                    format!(", at the edge of the bracket +-{:.3} us", half_width * 1e6)
+                } else {
+                    String::new()
+                }
+            ));
+            passes.push(rec);
+            let mut score = robust_start;
+            if robust_refined <= robust_start {
+                cur.model = exact.model;
+                cur.report.cost = exact.cost;
+                cur.report.conditioning.residues = exact.cond;
+                score = robust_refined;
+            }
+            let refined = cur.model.factors.delay_s;
+            if best.as_ref().is_none_or(|(_, _, b)| score < *b) {
+                best = Some((cur.clone(), pass, score));
+            }
+            if (refined - tau_div).abs() <= tol || pass == cfg.delay_passes {
+                break;
+            }
+            tau_div = refined;
+            let ts = Instant::now();
+            match self.subspace_step(
+                data,
+                tau_div,
+                true,
+                cur.report.delay_estimate.clone(),
+                pre.to_vec(),
+                Vec::new(),
+            ) {
+                Ok((next, p)) => {
+                    cur = next;
+                    poles = p;
+                    extra_timings.push((
+                        format!("subspace step, delay pass {}", pass + 1),
+                        ts.elapsed().as_secs_f64(),
+                    ));
+                }
+                Err(e) => {
+                    notes.push(format!(
+                        "delay pass {}: the subspace step with {:.4} us divided out failed ({e}); the earlier passes stand",
+                        pass + 1,
+                        tau_div * 1e6
+                    ));
+                    break;
+                }
+            }
+        }
+        let Some((mut out, chosen, _)) = best else {
+            unreachable!("the first delay pass always runs")
+        };
+        let refinement = DelayRefinement {
+            start_s: start,
+            refined_s: out.model.factors.delay_s,
+            half_width_s: half_width,
+            passes,
+            chosen_pass: chosen,
+        };
+        out.messages.extend(notes);
+        out.messages.push(format!(
+            "delay refined with the subspace poles fixed: {:.4} us -> {:.4} us beyond the hold (pass {chosen} of {} kept, {:.4} us divided out for its state space); it stays a free parameter for a refiner",
+            refinement.start_s * 1e6,
+            refinement.refined_s * 1e6,
+            refinement.passes.len(),
+            out.report.delay_s * 1e6
+        ));
+        out.report.delay_refinement = Some(refinement);
+        out.timings.extend(extra_timings);
+        out.timings.push(("delay refinement".to_string(), search_s));
+        out.timings
+            .push(("total".to_string(), t0.elapsed().as_secs_f64()));
+        Ok(out)
+    }
+
+    /// The subspace step with the delay `delay_s` (beyond the hold) divided out: the
+    /// projection, the order, (12), (17), the poles and the residue refit of the
+    /// currency. Returns the result and its poles.
+    fn subspace_step<D: FrfDataset + ?Sized>(
+        &self,
+        data: &D,
+        delay_s: f64,
+        fitted: bool,
+        delay_estimate: Option<DelayEstimate>,
+        mut messages: Vec<String>,
+        mut timings: Vec<(String, f64)>,
+    ) -> Result<(Identified, PoleSet), SubspaceError> {
+        let cfg = &self.config;
+        let t0 = Instant::now();
+        let (ny, nu, nl) = (data.ny(), data.nu(), data.n_lines());
+        let band = (data.freq_hz(0), data.freq_hz(nl - 1));
+        let band_txt = format!("{:.4}..{:.4} Hz", band.0, band.1);
         let factors = KnownFactors {
             delay_s,
             delay_fitted: fitted,
@@ -324,6 +601,9 @@ impl SubspaceInit {
                 "the projected data matrix is zero: nothing to identify",
             ));
         }
+        let n_max = ((r - 1) * ny).min(rank).min(cfg.max_order);
+        let inverse_variance = matches!(weighting, Weighting::InverseVariance);
+        let mut order_sweep = Vec::new();
         let (n, order_rule) = match cfg.order {
             Some(n) => {
                 if n > rank {
@@ -336,32 +616,62 @@ impl SubspaceInit {
                 (n, "given".to_string())
             }
             None => {
-                let n_max = ((r - 1) * ny).min(rank).min(cfg.max_order);
-                let above = sv[..n_max]
-                    .iter()
-                    .filter(|&&s| s > cfg.noise_threshold)
-                    .count();
-                if matches!(weighting, Weighting::InverseVariance) && above > 0 {
-                    (
-                        above,
-                        format!(
-                            "singular values above {} times the noise level (inverse-variance weighting): s_{above} = {:.3e}, s_{} = {:.3e}",
-                            cfg.noise_threshold,
-                            sv[above - 1],
-                            above + 1,
-                            sv[above]
-                        ),
-                    )
+                let (n0, sv_rule) = sv_proposal(&sv, n_max, inverse_variance, cfg.noise_threshold);
+                if cfg.order_rule == OrderRule::FTest {
+                    let t = Instant::now();
+                    let settings = SweepSettings {
+                        range: (n0.saturating_sub(cfg.sweep_below).max(1), n_max),
+                        observations: prepared.w.iter().filter(|&&w| w > 0.0).count(),
+                        alpha: cfg.order_alpha,
+                        min_f: cfg.order_min_f,
+                        patience: cfg.sweep_patience.max(1),
+                        exact_cost: EXACT_REL_COST * prepared.energy(),
+                    };
+                    let g = data.values_vec();
+                    let (chosen, scores) = f_sweep(&settings, |n| {
+                        let o = proj.observability(n);
+                        let (a, c, _) = shift_a_c(&o, ny).ok()?;
+                        let (b, _, _, _) = fit_b_d(&prepared, &a, &c).ok()?;
+                        let (eig, w) = eigen_weights(&a, &b, &c).ok()?;
+                        let ps = classify(
+                            &eig,
+                            &w,
+                            prepared.variable,
+                            prepared.omega[0],
+                            cfg.rigid_fraction,
+                            cfg.max_integrators,
+                            cfg.merge_tol,
+                        );
+                        let (model, _) =
+                            fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)
+                                .ok()?;
+                        let cost = weighted_cost(&model, data, &weighting).ok()?;
+                        Some((cost * 2.0 * nl as f64, currency_params(&ps, ny * nu)))
+                    });
+                    timings.push(("order F test".to_string(), t.elapsed().as_secs_f64()));
+                    order_sweep = scores;
+                    match chosen {
+                        Some(n) => {
+                            let last = order_sweep.iter().rev().find(|s| s.order > n);
+                            (
+                                n,
+                                format!(
+                                    "F test on the refitted residues of the poles of (12) with B, D of (17), alpha {:.0e}, orders {}..={} from {sv_rule}{}",
+                                    cfg.order_alpha,
+                                    settings.range.0,
+                                    order_sweep.last().map_or(n, |s| s.order),
+                                    match last {
+                                        Some(OrderScore { order, f: Some(f), f_critical: Some(fc), .. }) =>
+                                            format!("; order {order} after it: F = {f:.3e} below {fc:.3}"),
+                                        _ => String::new(),
+                                    }
+                                ),
+                            )
+                        }
+                        None => (n0, format!("{sv_rule} (the F test realised no order)")),
+                    }
                 } else {
-                    let (n, gap) = largest_gap(&sv, n_max);
-                    (
-                        n,
-                        format!(
-                            "largest gap of the singular values in 1..={n_max}: s_{n}/s_{} = {:.3e}",
-                            n + 1,
-                            gap.exp()
-                        ),
-                    )
+                    (n0, sv_rule)
                 }
             }
         };
@@ -375,6 +685,7 @@ impl SubspaceInit {
         timings.push(("A, C (12)".to_string(), t.elapsed().as_secs_f64()));
         let t = Instant::now();
         let (b, d, cond_bd, ss_cost) = fit_b_d(&prepared, &a, &c)?;
+        let (eig, eig_weight) = eigen_weights(&a, &b, &c)?;
         let state_space = match prepared.variable {
             Variable::Shift { ts } => {
                 StateSpace::new(a.clone(), b, c, d, TimeDomain::Discrete { ts })?
@@ -387,9 +698,9 @@ impl SubspaceInit {
         cfg.progress
             .step("subspace", 4, Some(4), None, "poles and residues");
         let t = Instant::now();
-        let eig = eigenvalues(&a)?;
-        let ps = classify(
+        let mut ps = classify(
             &eig,
+            &eig_weight,
             prepared.variable,
             prepared.omega[0],
             cfg.rigid_fraction,
@@ -410,11 +721,124 @@ impl SubspaceInit {
             ));
         }
         let g = data.values_vec();
-        let (model, cond_res) =
+        let (mut model, mut cond_res) =
             fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)?;
+        let mut cost = weighted_cost(&model, data, &weighting)?;
+        let significance_tests = match cfg.order_rule {
+            OrderRule::Auto => inverse_variance,
+            OrderRule::SingularValues => false,
+            OrderRule::FTest => true,
+        };
+        let raw = |c: f64| c * 2.0 * nl as f64;
+        if significance_tests
+            && ps.integrators < cfg.max_integrators
+            && raw(cost) > EXACT_REL_COST * prepared.energy()
+        {
+            // the rigid-body integrators the singular values missed (see `integrator_test`)
+            let m = ny * nu;
+            let observations = prepared.w.iter().filter(|&&w| w > 0.0).count();
+            let params = |ps: &PoleSet| currency_params(ps, m);
+            let k0 = ps.integrators;
+            for k in k0 + 1..=cfg.max_integrators {
+                let mut trial = ps.clone();
+                trial.integrators = k;
+                let (tm, tc) =
+                    fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &trial, &factors)?;
+                let t_cost = weighted_cost(&tm, data, &weighting)?;
+                let dp = (k - ps.integrators) * m;
+                let f = f_statistic(
+                    raw(cost) - raw(t_cost),
+                    dp,
+                    raw(t_cost),
+                    observations,
+                    params(&trial),
+                );
+                let fc = f_critical(dp, cfg.order_alpha).max(cfg.order_min_f);
+                messages.push(format!(
+                    "rigid body: {k} integrators against {}: F = {f:.3e} {} {fc:.3} (alpha {:.0e}), cost {:.4e} -> {:.4e}",
+                    ps.integrators,
+                    if f > fc { ">" } else { "<=" },
+                    cfg.order_alpha,
+                    cost,
+                    t_cost
+                ));
+                if f > fc {
+                    ps = trial;
+                    model = tm;
+                    cond_res = tc;
+                    cost = t_cost;
+                }
+            }
+            if ps.integrators > k0 {
+                messages.push(format!(
+                    "{} integrators added to the rigid-body part by the F test (the singular values gave {k0}: a rigid body weak at the lowest lines hides in the noise of the singular values)",
+                    ps.integrators - k0
+                ));
+                // Second pass: the flexible poles of the first were estimated with the
+                // rigid body missing or only partly in the states (one state for a
+                // double integrator), which biases them. The fitted rigid-body part is
+                // subtracted and the subspace step repeated on the flexible part alone.
+                if cfg.order.is_none() {
+                    let t2 = Instant::now();
+                    // repeated while it lowers the cost: each pass subtracts the rigid
+                    // body fitted with the previous pass's flexible poles
+                    for pass in 2..2 + FLEXIBLE_PASSES {
+                        let Some(next) = self.flexible_pass(
+                            &prepared,
+                            &model,
+                            r,
+                            ny,
+                            inverse_variance,
+                            &g,
+                            &factors,
+                            &ps,
+                            data,
+                            &weighting,
+                        )?
+                        else {
+                            break;
+                        };
+                        let kept = next.cost < cost;
+                        messages.push(format!(
+                            "pass {pass} on the data with the rigid body subtracted: order {} for the flexible part, cost {:.4e} -> {:.4e} ({})",
+                            next.order,
+                            cost,
+                            next.cost,
+                            if kept { "kept" } else { "not kept" }
+                        ));
+                        if !kept {
+                            break;
+                        }
+                        let gain = 1.0 - next.cost / cost;
+                        ps = next.poles;
+                        model = next.model;
+                        cond_res = next.cond;
+                        cost = next.cost;
+                        if gain < 0.01 {
+                            break;
+                        }
+                    }
+                    timings.push(("flexible pass".to_string(), t2.elapsed().as_secs_f64()));
+                }
+            }
+        }
+        // the merged poles, decided with the final rigid-body part
+        let (m2, c2, cost2) = self.choose_merged(
+            &prepared,
+            &g,
+            &factors,
+            &mut ps,
+            data,
+            &weighting,
+            &mut messages,
+        )?;
+        if let Some(m2) = m2 {
+            model = m2;
+            cond_res = c2;
+            cost = cost2;
+        }
         timings.push(("residues".to_string(), t.elapsed().as_secs_f64()));
-        let cost = weighted_cost(&model, data, &weighting)?;
-        timings.push(("total".to_string(), t0.elapsed().as_secs_f64()));
+        timings.push(("subspace step".to_string(), t0.elapsed().as_secs_f64()));
         messages.push(format!(
             "order {n} ({order_rule}); {} pole pairs, {} real poles, {} integrators; weighting: {}",
             ps.pairs.len(),
@@ -422,6 +846,42 @@ impl SubspaceInit {
             ps.integrators,
             weighting.name()
         ));
+        let shown = (n + 6).min(sv.len());
+        messages.push(format!(
+            "singular values s_1..s_{shown} of the {}projected data: {}",
+            if prepared.uniform { "" } else { "weighted " },
+            sv[..shown]
+                .iter()
+                .map(|s| format!("{s:.3e}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        ));
+        if let Some(sc) = order_sweep.iter().find(|s| s.order == n) {
+            if let Some(c) = sc.cost {
+                messages.push(format!(
+                    "order F test: cost {c:.4e} at order {n}; {}",
+                    order_sweep
+                        .iter()
+                        .map(|s| format!(
+                            "{}{}",
+                            s.order,
+                            match (s.f, s.f_critical) {
+                                (Some(f), Some(fc)) => format!(
+                                    ": F {f:.2e} {} {fc:.2}",
+                                    if s.kept { ">" } else { "<=" }
+                                ),
+                                _ if s.cost.is_none() => ": not realisable".to_string(),
+                                _ if s.kept && s.order == order_sweep[0].order =>
+                                    ": start".to_string(),
+                                _ if s.kept => ": no more parameters, lower cost".to_string(),
+                                _ => ": no more parameters".to_string(),
+                            }
+                        ))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
+        }
         let report = SubspaceReport {
             domain: prepared.variable.describe(),
             weighting: weighting.name().to_string(),
@@ -431,6 +891,7 @@ impl SubspaceInit {
             rank,
             order: n,
             order_rule,
+            order_sweep,
             conditioning: Conditioning {
                 shift: cond_shift,
                 b_d: cond_bd,
@@ -443,33 +904,238 @@ impl SubspaceInit {
             real_poles: ps.reals.len(),
             delay_estimate,
             delay_s,
+            delay_refinement: None,
             state_space_cost: ss_cost,
             cost,
             band_hz: band,
         };
-        Ok(Identified {
+        let out = Identified {
             state_space,
             model,
             report,
             messages,
             timings,
-        })
+        };
+        Ok((out, ps))
     }
 }
 
-/// Eigenvalues of a real square matrix.
-fn eigenvalues(a: &Mat<f64>) -> Result<Vec<C64>, SubspaceError> {
-    let ev = a
-        .eigenvalues()
-        .map_err(|e| SubspaceError::numerical("eigenvalues of A", format!("{e:?}")))?;
-    let v: Vec<C64> = ev.iter().map(|z| C64::new(z.re, z.im)).collect();
-    if v.iter().any(|z| !(z.re.is_finite() && z.im.is_finite())) {
-        return Err(SubspaceError::numerical(
-            "eigenvalues of A",
-            "non-finite eigenvalues",
-        ));
+/// Lines whose weighted squared residual exceeds this multiple of the median are
+/// down-weighted in the delay search (see [`delay_refine::robust_weights`]): a 3-sigma
+/// Huber threshold in amplitude.
+const ROBUST_LINE_C: f64 = 9.0;
+
+/// Most passes on the flexible part after the first (see `SubspaceInit::identify`).
+const FLEXIBLE_PASSES: usize = 8;
+
+/// Relative cost (to the weighted energy of the data) at or below which the F-test
+/// sweep takes a fit as exact (a relative rms error of 1e-8) and stops: beyond it the
+/// residual is roundoff, not noise.
+const EXACT_REL_COST: f64 = 1e-16;
+
+/// Free real parameters of the currency with the poles `ps` and `m` entries: a pole
+/// pair 2 and a complex residue per entry, a real pole 1 and a real residue per entry,
+/// an integrator and the feedthrough a coefficient per entry.
+fn currency_params(ps: &PoleSet, m: usize) -> usize {
+    2 * ps.pairs.len() * (1 + m) + ps.reals.len() * (1 + m) + (ps.integrators + 1) * m
+}
+
+/// The singular-value proposal of the order (see [`crate::order`]): the count above
+/// `threshold` times the noise level with inverse-variance weighting (when there is
+/// one), the largest gap otherwise; with its description.
+fn sv_proposal(
+    sv: &[f64],
+    n_max: usize,
+    inverse_variance: bool,
+    threshold: f64,
+) -> (usize, String) {
+    let above = sv[..n_max].iter().filter(|&&s| s > threshold).count();
+    if inverse_variance && above > 0 {
+        (
+            above,
+            format!(
+                "singular values above {threshold} times the noise level (inverse-variance weighting): s_{above} = {:.3e}, s_{} = {:.3e}",
+                sv[above - 1],
+                above + 1,
+                sv[above]
+            ),
+        )
+    } else {
+        let (n, gap) = largest_gap(sv, n_max);
+        (
+            n,
+            format!(
+                "largest gap of the singular values in 1..={n_max}: s_{n}/s_{} = {:.3e}",
+                n + 1,
+                gap.exp()
+            ),
+        )
     }
-    Ok(v)
+}
+
+/// The result of [`SubspaceInit::flexible_pass`].
+struct FlexiblePass {
+    order: usize,
+    poles: PoleSet,
+    model: FrfModel,
+    cond: f64,
+    cost: f64,
+}
+
+impl SubspaceInit {
+    /// For every pole pair merged from several eigenvalues (a residue of rank > 1 whose
+    /// repeated pole noise split), the pole among the merged eigenvalues, their
+    /// residue-weighted mean and their plain mean that gives the lowest cost of the
+    /// residue refit (one group after the other). Near-repeated eigenvalues have nearly
+    /// parallel eigenvectors, so their residue weights are unreliable, and the
+    /// eigenvalue of the weak direction of the residue can be far off: the refit decides.
+    /// Returns the new model, its condition number and cost when a candidate other than
+    /// the weighted mean won.
+    #[allow(clippy::too_many_arguments)]
+    fn choose_merged<D: FrfDataset + ?Sized>(
+        &self,
+        prepared: &crate::prepare::Prepared,
+        g: &[C64],
+        factors: &KnownFactors,
+        ps: &mut PoleSet,
+        data: &D,
+        weighting: &Weighting,
+        messages: &mut Vec<String>,
+    ) -> Result<(Option<FrfModel>, f64, f64), SubspaceError> {
+        let (ny, nu) = (prepared.ny, prepared.nu);
+        let mut best: Option<(FrfModel, f64, f64)> = None;
+        for q in 0..ps.pairs.len() {
+            let members = ps.pair_members.get(q).cloned().unwrap_or_default();
+            if members.len() < 2 {
+                continue;
+            }
+            let plain =
+                members.iter().fold(C64::new(0.0, 0.0), |a, &b| a + b) / members.len() as f64;
+            let current = ps.pairs[q];
+            let base_cost = match &best {
+                Some((_, _, c)) => *c,
+                None => {
+                    let (m, _) =
+                        fit_residues(ny, nu, &prepared.omega, g, &prepared.w, ps, factors)?;
+                    weighted_cost(&m, data, weighting)?
+                }
+            };
+            let mut chosen: Option<(C64, FrfModel, f64, f64)> = None;
+            for cand in members.iter().copied().chain(std::iter::once(plain)) {
+                let mut trial = ps.clone();
+                trial.pairs[q] = cand;
+                let (m, cond) =
+                    fit_residues(ny, nu, &prepared.omega, g, &prepared.w, &trial, factors)?;
+                let c = weighted_cost(&m, data, weighting)?;
+                let better = c < chosen.as_ref().map_or(base_cost, |x| x.3);
+                if better {
+                    chosen = Some((cand, m, cond, c));
+                }
+            }
+            if let Some((cand, m, cond, c)) = chosen {
+                messages.push(format!(
+                    "merged pole at {:.4} Hz: {:.6} Hz of its {} eigenvalues (refit cost {:.4e} against {:.4e} with the residue-weighted mean {:.6} Hz)",
+                    current.norm() / std::f64::consts::TAU,
+                    cand.norm() / std::f64::consts::TAU,
+                    members.len(),
+                    c,
+                    base_cost,
+                    current.norm() / std::f64::consts::TAU
+                ));
+                ps.pairs[q] = cand;
+                best = Some((m, cond, c));
+            }
+        }
+        Ok(match best {
+            Some((m, cond, c)) => (Some(m), cond, c),
+            None => (None, 0.0, 0.0),
+        })
+    }
+
+    /// The subspace step repeated on the data with the rigid-body part of `model`
+    /// subtracted: projection, order from the singular values, (12), (17), poles; the
+    /// integrators of `ps` are kept and all residues refitted on the full data.
+    #[allow(clippy::too_many_arguments)]
+    fn flexible_pass<D: FrfDataset + ?Sized>(
+        &self,
+        prepared: &crate::prepare::Prepared,
+        model: &FrfModel,
+        r: usize,
+        ny: usize,
+        inverse_variance: bool,
+        g: &[C64],
+        factors: &KnownFactors,
+        ps: &PoleSet,
+        data: &D,
+        weighting: &Weighting,
+    ) -> Result<Option<FlexiblePass>, SubspaceError> {
+        let cfg = &self.config;
+        let mut rigid = FrfModel {
+            modal: realize::ModalModel::new(model.ny(), model.nu()),
+            factors: factors.clone(),
+        };
+        rigid.modal.rigid = model.modal.rigid.clone();
+        let gr = rigid.freq_response(&prepared.omega)?;
+        let mut flex = prepared.clone();
+        let m = prepared.ny * prepared.nu;
+        for k in 0..prepared.n_lines() {
+            let inv = factors.scalar_at(prepared.omega[k]).inv();
+            let line = gr.line(k);
+            for e in 0..m {
+                flex.h[k * m + e] -= line[e] * inv;
+            }
+        }
+        let proj = project(&flex, r)?;
+        let sv = &proj.singular_values;
+        let rank = numerical_rank(sv);
+        if rank == 0 {
+            return Ok(None);
+        }
+        let n_max = ((r - 1) * ny).min(rank).min(cfg.max_order);
+        let (n, _) = sv_proposal(sv, n_max, inverse_variance, cfg.noise_threshold);
+        let o = proj.observability(n);
+        let Ok((a, c, _)) = shift_a_c(&o, ny) else {
+            return Ok(None);
+        };
+        let (b, _, _, _) = fit_b_d(&flex, &a, &c)?;
+        let (eig, w) = eigen_weights(&a, &b, &c)?;
+        let mut poles = classify(
+            &eig,
+            &w,
+            prepared.variable,
+            prepared.omega[0],
+            cfg.rigid_fraction,
+            cfg.max_integrators,
+            cfg.merge_tol,
+        );
+        poles.integrators = poles.integrators.max(ps.integrators);
+        let (mut model, mut cond) = fit_residues(
+            model.ny(),
+            model.nu(),
+            &prepared.omega,
+            g,
+            &prepared.w,
+            &poles,
+            factors,
+        )?;
+        let mut cost = weighted_cost(&model, data, weighting)?;
+        let mut notes = Vec::new();
+        let (m2, c2, cost2) = self.choose_merged(
+            prepared, g, factors, &mut poles, data, weighting, &mut notes,
+        )?;
+        if let Some(m2) = m2 {
+            model = m2;
+            cond = c2;
+            cost = cost2;
+        }
+        Ok(Some(FlexiblePass {
+            order: n,
+            poles,
+            model,
+            cond,
+            cost,
+        }))
+    }
 }
 
 impl Estimator for SubspaceInit {

@@ -12,15 +12,25 @@
 //! 2. [`projection`]: the real data matrix (10), the input term removed by a QR that
 //!    exploits the input structure and runs over blocks of lines (cost linear in the
 //!    lines), optional noise-covariance weighting, one SVD;
-//! 3. [`order`]: the order given or from the largest gap of the singular values;
+//! 3. [`order`]: the order given, from the singular values (noise threshold or largest
+//!    gap; the default), or by an F test on the refitted residues around the
+//!    singular-value proposal ([`OrderRule::FTest`]);
 //! 4. [`realization`]: `A`, `C` from (12), `B`, `D` from (17), the exact map back to
 //!    continuous time;
 //! 5. [`currency`]: exact continuous poles (`s = ln(z)/Ts` or the inverse bilinear map),
 //!    rigid-body integrators recognised at `z = 1` / `s = 0`, unstable poles reflected,
 //!    residues and feedthrough by linear least squares with the currency's own response;
-//! 6. [`SubspaceInit`]: all of it behind `frf_data::Estimator` (`Start = ()`).
+//!    with the data's variance, rigid-body integrators the singular values missed are
+//!    added by an F test and the subspace step is repeated on the data with the fitted
+//!    rigid body subtracted (while the cost falls); a pole merged from eigenvalues that
+//!    noise split (a residue of rank > 1) is the candidate with the lowest refit cost;
+//! 6. [`delay_refine`]: a free delay (estimated, or given as a start) refined with the
+//!    subspace poles fixed (the residue refit is linear, its cost a function of the
+//!    delay alone), the subspace step repeated with the refined delay divided out;
+//! 7. [`SubspaceInit`]: all of it behind `frf_data::Estimator` (`Start = ()`).
 
 pub mod currency;
+pub mod delay_refine;
 pub mod error;
 pub mod estimator;
 pub mod order;
@@ -28,5 +38,7 @@ pub mod prepare;
 pub mod projection;
 pub mod realization;
 
+pub use delay_refine::{DelayPass, DelayRefinement};
 pub use error::SubspaceError;
 pub use estimator::{Conditioning, Identified, SubspaceConfig, SubspaceInit, SubspaceReport};
+pub use order::{OrderRule, OrderScore};

@@ -91,6 +91,29 @@ impl Prepared {
         self.omega.len()
     }
 
+    /// Weighted energy `sum w |h|^2` of the data with the weights of (17) (`1 / var_h`,
+    /// or 1 unweighted).
+    pub fn energy(&self) -> f64 {
+        let m = self.ny * self.nu;
+        let mut e = 0.0;
+        for k in 0..self.n_lines() {
+            for i in 0..m {
+                let w = if self.uniform {
+                    1.0
+                } else {
+                    let v = self.var_h(k, i);
+                    if v.is_finite() {
+                        1.0 / v
+                    } else {
+                        0.0
+                    }
+                };
+                e += w * self.h[k * m + i].norm_sqr();
+            }
+        }
+        e
+    }
+
     /// `var_ke` of `h` (the inverse weight scaled by `|F|^-2`), infinite for a zero
     /// weight.
     pub fn var_h(&self, k: usize, e: usize) -> f64 {

@@ -56,7 +56,10 @@ fn parse_col(h: &str) -> Option<Col> {
         "period" => return Some(Col::Period),
         _ => {}
     }
-    let (kind, rest) = (h.chars().next()?, &h[1..]);
+    // the first character may be any width (a header is user text): split on chars
+    let mut chars = h.chars();
+    let kind = chars.next()?;
+    let rest = chars.as_str();
     let (idx, part) = rest.split_once('_')?;
     let i: usize = idx.parse().ok()?;
     if i == 0 {
@@ -401,5 +404,26 @@ mod tests {
             parse_spectra_csv("# only\n", "t").unwrap_err().problem(),
             Some(FormatProblem::Empty)
         );
+    }
+
+    /// Found by the fuzz target `spectra`: a header whose first character is wider than
+    /// one byte (`\u{fffd}` from invalid UTF-8, or any non-ASCII name) panicked on a
+    /// byte slice; it is an unknown column, named with its line.
+    #[test]
+    fn a_multibyte_header_is_an_unknown_column() {
+        for h in ["\u{fffd}1_re", "Ü1_re", "€"] {
+            let text = format!("freq_hz,experiment,realization,period,{h}\n1,1,1,1,0\n");
+            let e = parse_spectra_csv(&text, "t").unwrap_err();
+            assert_eq!(e.problem(), Some(FormatProblem::BadHeader), "{e}");
+            assert!(
+                e.to_string().contains(&format!("unknown column `{h}`")),
+                "{e}"
+            );
+            assert!(e.to_string().contains("t:1"), "{e}");
+        }
+        // the fuzzer's input itself, as the reader gets it (lossy UTF-8)
+        let bytes = include_bytes!("../../tests/fuzz_regressions/spectra-multibyte-header.bin");
+        let text = String::from_utf8_lossy(bytes);
+        assert!(parse_spectra_csv(&text, "fuzz.csv").is_err());
     }
 }

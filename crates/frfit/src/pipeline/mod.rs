@@ -198,12 +198,31 @@ impl PipelineOutput {
             links: self.links.clone(),
         };
         let band = self.summary.data.band_hz;
-        additive_riv::ModelFile::from_model(
+        let mut file = additive_riv::ModelFile::from_model(
             &self.fit.model,
             self.band.units.clone(),
             Some((band[0], band[1])),
             provenance,
-        )
+        )?;
+        // the refiner's standard deviations, when it computed a covariance of this model
+        if let Some(u) = &self.summary.uncertainty {
+            let modes: Vec<additive_riv::ModeStd> = u
+                .modes
+                .iter()
+                .map(|m| additive_riv::ModeStd {
+                    f_hz: m.f_hz,
+                    f_hz_std: m.f_hz_std,
+                    zeta_std: m.zeta_std,
+                })
+                .collect();
+            let delay_std = if file.delay_fitted {
+                u.delay_s_std
+            } else {
+                None
+            };
+            file.set_uncertainty(&modes, delay_std)?;
+        }
+        Ok(file)
     }
 
     /// What [`crate::report::write_report`] needs from this run, under `title`.
