@@ -168,22 +168,59 @@ pub fn cost_of(model: &AdditiveModel, data: &FitData) -> f64 {
 
 /// Settles the poles of `model` by Algorithm 1 at the coarse tolerance; `None` when the
 /// iterations fail or end with unstable submodels (the caller keeps what it had).
+fn settle_once(
+    model: AdditiveModel,
+    data: &FitData,
+    coarse: &RivConfig,
+    iterations: &mut usize,
+) -> Result<AdditiveModel, Option<AdditiveModel>> {
+    let fit = iterate(model, data, coarse);
+    let fit = fit.map_err(|_| None)?;
+    *iterations += fit.iterations;
+    if matches!(fit.convergence, Convergence::Failed { .. }) && fit.iterations <= 1 {
+        return Err(None);
+    }
+    if !fit.model.unstable_submodels().is_empty() {
+        return Err(Some(fit.model));
+    }
+    let c = model_cost(&fit.model, data, None);
+    if c.is_finite() {
+        Ok(fit.model)
+    } else {
+        Err(None)
+    }
+}
+
+/// Settles the poles of `model` by Algorithm 1 at the coarse tolerance. A mode whose
+/// pole leaves the stable region while settling is not supported where the start put
+/// it (typically a start mode pulled towards a stronger mode the start lacks): it is
+/// removed, the numerators refitted (eq. 24), and the rest settled once more; the
+/// residual-driven completion then adds modes where the data show them. `None` when the
+/// iterations fail, or when the second settling fails too, or when removing the
+/// unstable modes would leave no mode (the caller keeps what it had).
 fn settle(
     model: AdditiveModel,
     data: &FitData,
     coarse: &RivConfig,
     iterations: &mut usize,
 ) -> Option<AdditiveModel> {
-    let fit = iterate(model, data, coarse).ok()?;
-    *iterations += fit.iterations;
-    if matches!(fit.convergence, Convergence::Failed { .. }) && fit.iterations <= 1 {
-        return None;
+    match settle_once(model, data, coarse, iterations) {
+        Ok(m) => Some(m),
+        Err(None) => None,
+        Err(Some(mut m)) => {
+            let mut bad = m.unstable_submodels();
+            bad.retain(|&i| m.submodels[i].kind == SubmodelKind::Mode);
+            if bad.is_empty() || bad.len() >= m.modes().len() {
+                return None;
+            }
+            bad.sort_unstable_by(|a, b| b.cmp(a));
+            for i in bad {
+                m.remove_submodel(i);
+            }
+            fit_numerators(&mut m, data).ok()?;
+            settle_once(m, data, coarse, iterations).ok()
+        }
     }
-    if !fit.model.unstable_submodels().is_empty() {
-        return None;
-    }
-    let c = model_cost(&fit.model, data, None);
-    c.is_finite().then_some(fit.model)
 }
 
 fn integrators_of(model: &AdditiveModel) -> usize {
@@ -342,12 +379,59 @@ fn has_duplicate(model: &AdditiveModel) -> bool {
     })
 }
 
-/// Candidate new modes: CMIF peaks of the weighted residual `sqrt(w) (G - P)` (the
-/// residual whose energy is the cost) inside the band, with `sigma_1^2` at least
-/// `cfg.peak_over_median` times the residual's median `sigma_1^2`; the strongest first,
-/// as (frequency in Hz, damping estimate). With `unit_variance` the weighted residual
-/// has unit variance per entry (inverse-variance weights) and the picker measures the
-/// prominences against it; otherwise it estimates the noise itself.
+/// Why the modes of `model` from submodel `first` on are not kept, when one of them
+/// is unresolved (its half-power bandwidth `2 zeta f` below the line spacing) and not
+/// significant off its own lines ([`crate::structure::significant_off_peak`]: its
+/// numerators refitted without the lines within one line spacing of it, the F test at
+/// `cfg.alpha` and at least `cfg.min_f`, with the noise scale of that residual).
+fn unresolved_spike(
+    model: &AdditiveModel,
+    data: &FitData,
+    first: usize,
+    cfg: &CompleteConfig,
+) -> Result<Option<String>, RivError> {
+    for i in first..model.submodels.len() {
+        if model.submodels[i].kind != SubmodelKind::Mode {
+            continue;
+        }
+        let Some(p) = model.upper_pole(&model.submodels[i]) else {
+            continue;
+        };
+        let (f, bw) = (p.norm() / TAU, 2.0 * p.re.abs() / TAU);
+        let df = crate::structure::line_spacing_near(data, f);
+        if bw < df && !crate::structure::significant_off_peak(model, data, i, cfg.alpha, cfg.min_f)?
+        {
+            return Ok(Some(format!(
+                "unresolved: half-power bandwidth {bw:.3} Hz below the line spacing {df:.3} Hz \
+                 and not significant off its own lines"
+            )));
+        }
+    }
+    Ok(None)
+}
+
+/// Candidate new modes, the most likely first, as (frequency in Hz, damping estimate):
+/// CMIF peaks inside the band of two views of the residual `G - P`, taken alternately
+/// (the strongest of each view first, then the second of each, ...; a peak within
+/// `cfg.min_separation` of one already listed is the same misfit):
+///
+/// - the weighted residual `sqrt(w) (G - P)`, the residual whose energy is the cost:
+///   it shows a misfit where the criterion feels it (a merged close pair, a mode whose
+///   numerator is poor);
+/// - the residual `G - P` itself, the frequency response of the dynamics the model
+///   lacks, which peaks at a missing mode's resonance. A weighting that follows the
+///   data's magnitude (eq. 27, or inverse variances of noise proportional to it)
+///   divides that peak by the data's own resonance peak: where a missing mode dominates
+///   the response from its resonance upwards (a well damped mode above the others), the
+///   weighted residual is flat there and shows no peak at all.
+///
+/// Peaks of the plain view within the half-power half-width `zeta f` of a fitted mode
+/// are left to the weighted view. In each view a peak is a candidate when its `sigma_1^2` is at least
+/// `cfg.peak_over_median` times the view's median `sigma_1^2` and above the rounding
+/// floor of the data there. The candidates only place trials; whether a mode is added
+/// is decided by the significance tests of [`complete_start`]. With `unit_variance` the
+/// weighted residual has unit variance per entry (inverse-variance weights) and the
+/// picker measures its prominences against it.
 fn residual_candidates(
     model: &AdditiveModel,
     data: &FitData,
@@ -356,14 +440,51 @@ fn residual_candidates(
 ) -> Vec<(f64, Option<f64>)> {
     let mut resid = Vec::new();
     model_cost(model, data, Some(&mut resid));
-    let weighted: Vec<C64> = resid
+    let weighted = view_candidates(&resid, data, true, unit_variance, cfg);
+    let mut plain = view_candidates(&resid, data, false, false, cfg);
+    // in the plain view a fitted mode's own coarse misfit peaks at its resonance, where
+    // the data are largest; the split of a mode that is really two shows in the
+    // weighted view
+    let modes = mode_list(model);
+    plain.retain(|(f, _)| modes.iter().all(|(fm, zm)| (f - fm).abs() > zm * fm));
+    let mut out: Vec<(f64, Option<f64>)> = Vec::new();
+    for k in 0..weighted.len().max(plain.len()) {
+        for p in [plain.get(k), weighted.get(k)].into_iter().flatten() {
+            if out
+                .iter()
+                .all(|(f, _)| (p.0 - f).abs() > cfg.min_separation * f)
+            {
+                out.push(*p);
+            }
+        }
+    }
+    out
+}
+
+/// The candidates of one view of the residual `resid` (weighted by `sqrt(w)` when
+/// `weighted`), the strongest first; see [`residual_candidates`].
+fn view_candidates(
+    resid: &[C64],
+    data: &FitData,
+    weighted: bool,
+    unit_variance: bool,
+    cfg: &CompleteConfig,
+) -> Vec<(f64, Option<f64>)> {
+    let scale = |i: usize| -> f64 {
+        if weighted {
+            data.w[i].max(0.0)
+        } else {
+            1.0
+        }
+    };
+    let view: Vec<C64> = resid
         .iter()
-        .zip(&data.w)
-        .map(|(e, w)| *e * w.max(0.0).sqrt())
+        .enumerate()
+        .map(|(i, e)| *e * scale(i).sqrt())
         .collect();
     let f: Vec<f64> = data.omega.iter().map(|w| w / TAU).collect();
-    let var = unit_variance.then(|| vec![1.0; weighted.len()]);
-    let Ok(frf) = Frf::new(f, data.ny, data.nu, weighted, var) else {
+    let var = unit_variance.then(|| vec![1.0; view.len()]);
+    let Ok(frf) = Frf::new(f, data.ny, data.nu, view, var) else {
         return Vec::new();
     };
     let Ok(c) = cmif(&frf) else {
@@ -374,10 +495,10 @@ fn residual_candidates(
     let median = s1[s1.len() / 2];
     let (lo, hi) = data.band_hz;
     let m = data.m();
-    // the weighted data's energy at a line (an upper bound of its sigma_1^2)
+    // the data's energy at a line in the same view (an upper bound of its sigma_1^2)
     let level = |k: usize| -> f64 {
         (0..m)
-            .map(|e| data.w[k * m + e] * data.g[k * m + e].norm_sqr())
+            .map(|e| scale(k * m + e) * data.g[k * m + e].norm_sqr())
             .sum::<f64>()
     };
     let floor = cfg.rounding_floor * cfg.rounding_floor;
@@ -461,7 +582,14 @@ pub fn complete_start(
         ..Default::default()
     };
     let mut its = 0;
-    let mut cur = settle(model.clone(), data, &coarse, &mut its).unwrap_or(model);
+    // the rigid body is chosen again only against settled poles: a start whose poles
+    // did not settle (the iterations failed or left the stable region) misfits so
+    // grossly that the F test's noise scale, estimated from that misfit, finds no
+    // rigid body significant, and the choice made by comparing the initial fits stands
+    let (mut cur, mut settled) = match settle(model.clone(), data, &coarse, &mut its) {
+        Some(m) => (m, true),
+        None => (model, false),
+    };
     let mut v = model_cost(&cur, data, None);
     let rechoose = |cur: AdditiveModel, v: f64, its: &mut usize| -> (AdditiveModel, f64) {
         let l_now = integrators_of(&cur);
@@ -471,11 +599,14 @@ pub fn complete_start(
         if integrators_of(&m) == l_now {
             return (cur, v);
         }
-        let m = settle(m.clone(), data, &coarse, its).unwrap_or(m);
+        // the new rigid body stands only with poles that settle around it
+        let Some(m) = settle(m, data, &coarse, its) else {
+            return (cur, v);
+        };
         let vm = model_cost(&m, data, None);
         (m, vm)
     };
-    if rigid_auto {
+    if rigid_auto && settled {
         (cur, v) = rechoose(cur, v, &mut its);
     }
     if add_modes {
@@ -524,6 +655,16 @@ pub fn complete_start(
                 let fs = f_statistic(v - vt, added, s2);
                 let fcrit = f_critical(added, cfg.alpha).max(cfg.min_f);
                 if vt < (1.0 - cfg.min_cost_drop) * v && fs > fcrit {
+                    // an added mode narrower than the line spacing must explain the
+                    // residual off its own lines: one outlying line (a noise spike, or a
+                    // line where the weighting amplifies the noise, as eq. (27) does at
+                    // an anti-resonance) is fitted by such a mode as well as by any
+                    if let Some(why) = unresolved_spike(&trial, data, n_old, cfg)? {
+                        for &(f, _) in cand.iter() {
+                            report.rejected.push((f, why.clone()));
+                        }
+                        continue;
+                    }
                     accepted = Some((trial, vt, n_old));
                     break;
                 }
@@ -575,7 +716,8 @@ pub fn complete_start(
             }
             cur = trial;
             v = vt;
-            if rigid_auto {
+            settled = true;
+            if rigid_auto && settled {
                 (cur, v) = rechoose(cur, v, &mut its);
             }
         }

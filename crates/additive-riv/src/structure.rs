@@ -265,7 +265,8 @@ pub fn local_energy(stats: &ResidualStats, data: &FitData, f_hz: f64, half_hz: f
 }
 
 /// Line spacing of the data near `f_hz` (Hz).
-fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
+/// The spacing (Hz) of the lines of `data` around `f_hz`.
+pub(crate) fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
     let w = TAU * f_hz;
     let k = data.omega.partition_point(|&x| x < w).min(data.n - 1);
     let (a, b) = if k == 0 {
@@ -289,15 +290,17 @@ fn mode_f_hz(model: &AdditiveModel, i: usize) -> f64 {
 /// True when mode `i` of `model` is significant on the lines outside its own
 /// resonance: its numerators are refitted with the lines within one line spacing of its
 /// frequency left out (zero weight), and its F statistic on the remaining lines passes
-/// the test of [`drop_pass`] (at `alpha`, and at least `min_f`). A mode narrower than
+/// the F test at `alpha` (and reaches at least `min_f`), its noise scale estimated from
+/// the residual on those lines. A mode narrower than
 /// the line spacing that fits one or two outlying lines (a spike of the noise) explains
 /// nothing elsewhere; a real lightly damped mode sampled coarsely shapes its flanks over
 /// many lines and is identified by them.
-fn significant_off_peak(
+pub(crate) fn significant_off_peak(
     model: &AdditiveModel,
     data: &FitData,
     i: usize,
-    cfg: &AdaptConfig,
+    alpha: f64,
+    min_f: f64,
 ) -> Result<bool, RivError> {
     let f = mode_f_hz(model, i);
     let df = line_spacing_near(data, f);
@@ -333,7 +336,7 @@ fn significant_off_peak(
     let p = trial.submodels[i].den.len() + trial.submodels[i].num.len() * m;
     let s2 = noise_scale(v, &off, trial.n_params());
     let fs = f_statistic(dv[i], p, s2);
-    Ok(fs >= f_critical_eff(p as f64, cfg.alpha).max(cfg.min_f))
+    Ok(fs >= f_critical_eff(p as f64, alpha).max(min_f))
 }
 
 /// Removed (submodel index, frequency, reason) and per-submodel (frequency, F statistic).
@@ -373,7 +376,7 @@ fn drop_pass(
         } else if f < lo / cfg.band_margin || f > hi * cfg.band_margin {
             remove.push((i, format!("moved outside the band {lo:.1}..{hi:.1} Hz")));
         } else if 2.0 * zeta * f < line_spacing_near(data, f)
-            && !significant_off_peak(model, data, i, cfg)?
+            && !significant_off_peak(model, data, i, cfg.alpha, cfg.min_f)?
         {
             remove.push((
                 i,
