@@ -59,8 +59,8 @@ pub struct CmifInitConfig {
     /// Completion of the start ([`crate::complete`]): coincident peaks merged, poles
     /// settled, the rigid body chosen again (with [`RigidBody::Auto`]) and modes added at
     /// significant peaks of the residual's CMIF (with [`ModeSelection::Auto`]). Default:
-    /// `None` (the plain initialisation of section 4.4): opt-in until it adds no
-    /// spurious mode on the wafer stage with the eq. (27) weighting.
+    /// `Some(CompleteConfig::default())`; `None` gives the plain initialisation of
+    /// section 4.4.
     pub complete: Option<CompleteConfig>,
 }
 
@@ -79,7 +79,7 @@ impl Default for CmifInitConfig {
             weighting: Weighting::Auto,
             progress: ProgressSink::none(),
             precomputed: Precomputed::default(),
-            complete: None,
+            complete: Some(CompleteConfig::default()),
         }
     }
 }

@@ -16,14 +16,20 @@
 //!    the residual shows what is missing rather than what is misplaced.
 //! 3. **The rigid body again**: the number of integrators (0, 1 or 2) is chosen anew
 //!    with the settled poles, by the F test of the numerator fits (24).
-//! 4. **Residual-driven completion**: the weighted residual `sqrt(w) (G - P)` is a
-//!    frequency response of its own; its CMIF ([`frf_data::cmif`]) peaks where modes are
-//!    missing. A peak whose level is well above the residual's median level becomes a
-//!    new mode (a second mode near an existing one when it lies inside that mode's
-//!    bandwidth), the poles are settled again, and the new modes are kept only when the
-//!    cost falls significantly (an F test, at least [`CompleteConfig::min_f`], and by
-//!    at least [`CompleteConfig::min_cost_drop`]). This repeats a bounded number of
-//!    times.
+//! 4. **Residual-driven completion**: the residual `G - P` is a frequency response of its
+//!    own; its CMIF ([`frf_data::cmif`]) peaks where modes are missing. Candidates come
+//!    from two views of it, the weighted residual `sqrt(w) (G - P)` (whose energy is the
+//!    cost) and the plain one (where a weighting that follows the data's magnitude,
+//!    eq. (27), does not flatten a missing mode's resonance); see
+//!    `residual_candidates`. Each candidate becomes a trial mode (a second mode near
+//!    an existing one when it lies inside that mode's bandwidth), the poles are settled
+//!    again, and the mode is kept only when the cost falls significantly: an F test at
+//!    [`CompleteConfig::alpha`] with the noise scale estimated from the trial's residual
+//!    (at least [`CompleteConfig::min_f`], and a drop of at least
+//!    [`CompleteConfig::min_cost_drop`]); a mode narrower than the line spacing must
+//!    pass the same test on the lines off its own resonance (one outlying line is fitted
+//!    by such a mode as well as by any). This repeats a bounded number of times; the
+//!    rigid body is chosen again after every kept mode.
 
 use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
 use crate::riv::{iterate, RivConfig};

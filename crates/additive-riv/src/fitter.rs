@@ -183,7 +183,7 @@ impl AdditiveFitter {
             weighting: cfg.riv.weighting.clone(),
             progress: cfg.progress.clone(),
             precomputed: Default::default(),
-            complete: None,
+            complete: Some(Default::default()),
         })
         .estimate(data, ())?;
         cfg.progress
