@@ -9,6 +9,7 @@
 //!   the currency ([`AdditiveModel::from_frf_model`]: its poles, rigid body, feedthrough
 //!   and known factors) with the numerators of eq. (24).
 
+use crate::complete::{complete_start, merge_coincident_peaks, CompleteConfig, CompleteReport};
 use crate::fitter::{check_fs, choose_rigid_body};
 use crate::init::{initial_model, InitConfig, RigidBody};
 use crate::numerators::fit_numerators;
@@ -55,6 +56,12 @@ pub struct CmifInitConfig {
     /// place of estimating the delay with `delay_config` and of computing the CMIF).
     /// Default: none.
     pub precomputed: Precomputed,
+    /// Completion of the start ([`crate::complete`]): coincident peaks merged, poles
+    /// settled, the rigid body chosen again (with [`RigidBody::Auto`]) and modes added at
+    /// significant peaks of the residual's CMIF (with [`ModeSelection::Auto`]). Default:
+    /// `Some(CompleteConfig::default())`; `None` gives the plain initialisation of
+    /// section 4.4.
+    pub complete: Option<CompleteConfig>,
 }
 
 impl Default for CmifInitConfig {
@@ -72,6 +79,7 @@ impl Default for CmifInitConfig {
             weighting: Weighting::Auto,
             progress: ProgressSink::none(),
             precomputed: Precomputed::default(),
+            complete: Some(CompleteConfig::default()),
         }
     }
 }
@@ -91,6 +99,8 @@ pub struct CmifInitReport {
     pub init_cost: f64,
     /// Band fitted, Hz.
     pub band_hz: (f64, f64),
+    /// What the completion of the start did, when it ran.
+    pub completion: Option<CompleteReport>,
 }
 
 /// The CMIF + convex-numerator initialiser (section 3.3 and 4.4 of the wafer-stage
@@ -198,7 +208,12 @@ impl Estimator for CmifInit {
                     pc.n_modes = Some(*n);
                 }
                 let peaks = pick_peaks(c, &pc);
-                let f = peaks.iter().map(|p| p.f_hz).collect();
+                let f = match (&cfg.complete, sel) {
+                    (Some(cc), ModeSelection::Auto) => {
+                        merge_coincident_peaks(&peaks, cc.merge_fraction, cfg.zeta0)
+                    }
+                    _ => peaks.iter().map(|p| p.f_hz).collect(),
+                };
                 report.cmif_peaks = peaks;
                 f
             }
@@ -213,11 +228,53 @@ impl Estimator for CmifInit {
             zeta0: cfg.zeta0,
             first_order_numerators: false,
         };
-        let init = match cfg.rigid_body {
+        let mut init = match cfg.rigid_body {
             RigidBody::Auto => choose_rigid_body(&fd, &freqs, &base)?,
             _ => initial_model(&fd, &freqs, &base)?,
         };
         timings.push(("init", t.elapsed()));
+        if let Some(cc) = &cfg.complete {
+            let t = Instant::now();
+            let add = matches!(cfg.modes, ModeSelection::Auto);
+            let unit_variance = matches!(weighting, Weighting::InverseVariance);
+            let (model, rep) = complete_start(
+                init.model.clone(),
+                &fd,
+                unit_variance,
+                cfg.rigid_body == RigidBody::Auto,
+                add,
+                cc,
+            )?;
+            init.model = model;
+            init.cost_history
+                .push(crate::complete::cost_of(&init.model, &fd) / (2.0 * fd.n as f64));
+            init.messages.push(format!(
+                "start completed ({} iterations of Algorithm 1 at a coarse tolerance): {}{}",
+                rep.iterations,
+                if rep.added.is_empty() {
+                    "no mode added".to_string()
+                } else {
+                    format!(
+                        "modes added at residual CMIF peaks: {}",
+                        rep.added
+                            .iter()
+                            .map(|f| format!("{f:.2} Hz"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                },
+                if rep.integrators.0 != rep.integrators.1 {
+                    format!(
+                        "; rigid body with the settled poles: {} -> {} integrator(s)",
+                        rep.integrators.0, rep.integrators.1
+                    )
+                } else {
+                    String::new()
+                }
+            ));
+            report.completion = Some(rep);
+            timings.push(("complete", t.elapsed()));
+        }
         report.integrators = init
             .model
             .submodels

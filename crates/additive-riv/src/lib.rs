@@ -14,11 +14,14 @@
 //!   the SK variant (Remark 1), solved by eliminating the per-entry numerator
 //!   parameters (a Schur complement onto the shared denominators), so that an iteration
 //!   costs O(lines x entries);
+//! - [`complete`]: completion of the CMIF start (coincident peaks merged, poles
+//!   settled, the rigid body chosen again, modes added at peaks of the residual's CMIF);
 //! - [`structure`]: adding modes at peaks of the residual's CMIF and dropping
 //!   insignificant ones, so that a plain fit holds every mode the data show.
 
 pub mod augment;
 pub mod chain;
+pub mod complete;
 pub mod error;
 pub mod fitter;
 pub mod init;

@@ -265,7 +265,8 @@ pub fn local_energy(stats: &ResidualStats, data: &FitData, f_hz: f64, half_hz: f
 }
 
 /// Line spacing of the data near `f_hz` (Hz).
-fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
+/// The spacing (Hz) of the lines of `data` around `f_hz`.
+pub(crate) fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
     let w = TAU * f_hz;
     let k = data.omega.partition_point(|&x| x < w).min(data.n - 1);
     let (a, b) = if k == 0 {
@@ -286,11 +287,64 @@ fn mode_f_hz(model: &AdditiveModel, i: usize) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
+/// True when mode `i` of `model` is significant on the lines outside its own
+/// resonance: its numerators are refitted with the lines within one line spacing of its
+/// frequency left out (zero weight), and its F statistic on the remaining lines passes
+/// the F test at `alpha` (and reaches at least `min_f`), its noise scale estimated from
+/// the residual on those lines. A mode narrower than
+/// the line spacing that fits one or two outlying lines (a spike of the noise) explains
+/// nothing elsewhere; a real lightly damped mode sampled coarsely shapes its flanks over
+/// many lines and is identified by them.
+pub(crate) fn significant_off_peak(
+    model: &AdditiveModel,
+    data: &FitData,
+    i: usize,
+    alpha: f64,
+    min_f: f64,
+) -> Result<bool, RivError> {
+    let f = mode_f_hz(model, i);
+    let df = line_spacing_near(data, f);
+    if !(f.is_finite() && df.is_finite()) {
+        return Ok(false);
+    }
+    let m = data.m();
+    let mut w = data.w.clone();
+    for k in 0..data.n {
+        if (data.omega[k] / TAU - f).abs() <= df * (1.0 + 1e-9) {
+            w[k * m..(k + 1) * m].iter_mut().for_each(|x| *x = 0.0);
+        }
+    }
+    let off = FitData::from_parts(
+        data.omega.clone(),
+        data.ny,
+        data.nu,
+        data.g.clone(),
+        w,
+        data.band_hz,
+    );
+    let mut trial = model.clone();
+    let v = match fit_numerators(&mut trial, &off) {
+        Ok(v) => v,
+        Err(RivError::Numerical { .. }) => return Ok(false),
+        Err(e) => return Err(e),
+    };
+    let dv = match submodel_cost_increase(&trial, &off) {
+        Ok(dv) => dv,
+        Err(RivError::Numerical { .. }) => return Ok(false),
+        Err(e) => return Err(e),
+    };
+    let p = trial.submodels[i].den.len() + trial.submodels[i].num.len() * m;
+    let s2 = noise_scale(v, &off, trial.n_params());
+    let fs = f_statistic(dv[i], p, s2);
+    Ok(fs >= f_critical_eff(p as f64, alpha).max(min_f))
+}
+
 /// Removed (submodel index, frequency, reason) and per-submodel (frequency, F statistic).
 type DropOutcome = (Vec<(usize, f64, String)>, Vec<(f64, f64)>);
 
-/// Removes unstable, overdamped, out-of-band, unresolved and duplicated modes (checks on
-/// the poles alone), then the modes whose numerators are insignificant (F test at
+/// Removes unstable, overdamped, out-of-band, unresolved (a half-power bandwidth below
+/// the line spacing and not significant off its own lines, [`significant_off_peak`]) and
+/// duplicated modes (checks on the poles), then the modes whose numerators are insignificant (F test at
 /// `alpha` with the effective number of parameters, and at least `min_f`). Returns the
 /// removed (frequency, reason) pairs and, per submodel of the model as given, its
 /// frequency and F statistic (NaN when removed before the test). Numerators are refitted
@@ -321,11 +375,13 @@ fn drop_pass(
             remove.push((i, "real (overdamped) poles: not a resonance".into()));
         } else if f < lo / cfg.band_margin || f > hi * cfg.band_margin {
             remove.push((i, format!("moved outside the band {lo:.1}..{hi:.1} Hz")));
-        } else if 2.0 * zeta * f < line_spacing_near(data, f) {
+        } else if 2.0 * zeta * f < line_spacing_near(data, f)
+            && !significant_off_peak(model, data, i, cfg.alpha, cfg.min_f)?
+        {
             remove.push((
                 i,
                 format!(
-                    "unresolved: half-power bandwidth {:.3} Hz is below the line spacing {:.3} Hz",
+                    "unresolved: half-power bandwidth {:.3} Hz is below the line spacing {:.3} Hz and the mode is not significant off its own lines",
                     2.0 * zeta * f,
                     line_spacing_near(data, f)
                 ),

@@ -21,6 +21,7 @@
 //! run is reported in [`ChainResult::runs`] and in the notes.
 
 use crate::FrfitError;
+use additive_riv::complete::CompleteConfig;
 use additive_riv::structure::AdaptConfig;
 use additive_riv::{CmifInit, CmifInitConfig, RigidBody, RivConfig, RivRefine, RivRefineConfig};
 use frf_data::chain::{weighted_cost, DynData};
@@ -43,6 +44,12 @@ pub struct AdditiveOptions {
     /// Realizations the data's variance was estimated from, when declared (the ML
     /// refiner's cost test expects `V / N_dof = (R - 1) / (R - 2)` then).
     pub realizations: Option<usize>,
+    /// Completion of the CMIF start ([`additive_riv::complete`]): missing modes added
+    /// at residual CMIF peaks, the rigid body chosen again with settled poles. Default:
+    /// `Some(CompleteConfig::default())`, as [`CmifInitConfig`]; the diagnosis pipeline
+    /// passes `None` (its loop adds the modes itself and is validated on the reference
+    /// files with the plain start).
+    pub complete_start: Option<CompleteConfig>,
 }
 
 impl Default for AdditiveOptions {
@@ -52,6 +59,7 @@ impl Default for AdditiveOptions {
             adapt: Some(AdaptConfig::default()),
             rigid_body: RigidBody::Auto,
             realizations: None,
+            complete_start: Some(CompleteConfig::default()),
         }
     }
 }
@@ -94,6 +102,7 @@ fn make_cmif(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Initializer> {
             weighting: s.weighting.clone(),
             progress: s.progress.clone(),
             precomputed: s.precomputed.clone(),
+            complete: o.complete_start.clone(),
             ..Default::default()
         }),
     })

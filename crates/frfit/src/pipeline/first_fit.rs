@@ -78,6 +78,9 @@ pub fn chain_fit(
         adapt: fc.adapt.clone(),
         rigid_body: fc.rigid_body,
         realizations: ctx.declared.realizations,
+        // the plain CMIF start: with the completion the loop's steps change on the
+        // reference files (a spurious second input_dynamics step on the input-lag case)
+        complete_start: None,
     };
     let result = run_chain(&ctx.band, &cfg.init, &cfg.refine, &settings, &opts)?;
     let model = match result.model.native::<AdditiveModel>() {
