@@ -121,6 +121,13 @@ pub(crate) fn column_norms(r: &[f64], n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// A cost at or below this fraction of the weighted data energy is an exact fit to
+/// rounding (a relative residual of 1e-12): when no step lowers it, the iteration has
+/// converged, whatever the linearisation predicts (on noise-free data the prediction is
+/// itself rounding noise: random systems ended at a median error of 1e-16 reported as
+/// failed, 13 of 600 in a scan of seeds 9800..9999).
+const ROUNDING_COST: f64 = 1e-24;
+
 /// Runs the iterations from `theta0` (whose evaluation is `eval0`); `dof` is the number
 /// of residual degrees of freedom `N_dof` of the cost (for the step test in standard
 /// deviations). `valid` rejects a trial point outside the parameter domain (a pole
@@ -145,6 +152,14 @@ pub(crate) fn iterate(
         limit: s.max_iterations,
     };
     let mut work = Work::default();
+    // the weighted energy of the data, on the scale of the cost (`sw = sqrt(2 w)`)
+    let data_energy: f64 = prob
+        .g
+        .iter()
+        .zip(&prob.sw)
+        .map(|(g, s)| (s * g.norm()).powi(2))
+        .sum::<f64>()
+        / 2.0;
     let jacobian = |theta: &[f64], ev: &Eval, work: &mut Work| {
         let t = Instant::now();
         let out = prob.jacobian_r(theta, ev);
@@ -201,11 +216,18 @@ pub(crate) fn iterate(
             lambda *= 4.0;
         }
         let Some((trial, e2, d)) = accepted else {
-            // no damped step lowers the cost: a stationary point to rounding
+            // no damped step lowers the cost: a stationary point to rounding, or an
+            // exact fit (noise-free data) whose cost is rounding noise, where the
+            // linearisation's predicted decrease is rounding noise too
             let pred = z2 / r2;
+            let at_rounding = ev.cost <= ROUNDING_COST * data_energy;
             conv = if pred < 1e-8 {
                 Convergence::CostTolerance {
                     relative_change: pred,
+                }
+            } else if at_rounding {
+                Convergence::CostTolerance {
+                    relative_change: ev.cost / data_energy,
                 }
             } else {
                 Convergence::Failed {
