@@ -626,7 +626,13 @@ impl Estimator for SkInit {
                     start = start.max((2 * p).saturating_sub(4));
                     report.cmif_peaks = Some(p);
                 }
-                let (n, c, scores) = self.sweep(&prep, &basis, start)?;
+                let (mut n, mut c, mut scores) = self.sweep(&prep, &basis, start)?;
+                if n == start && start > cfg.min_order {
+                    // the sweep kept its first order: the start from the peaks may be at
+                    // or above the true order (spurious CMIF peaks: 7 peaks for 4 modes,
+                    // an exact fit at 10 poles for 8), so the orders below are swept too
+                    (n, c, scores) = self.sweep(&prep, &basis, cfg.min_order)?;
+                }
                 report.sweep = scores;
                 // the chosen order to convergence, unless the sweep already converged
                 let c = if c.sk.convergence.is_converged() {
