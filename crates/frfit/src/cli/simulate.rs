@@ -158,6 +158,15 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     }
 }
 
+/// Writes a truth JSON file (the schema of the reference data's `*.truth.json`).
+fn write_truth(path: &std::path::Path, truth: &frf_data::truth::Truth) -> Result<(), FrfitError> {
+    let text = serde_json::to_string_pretty(truth).map_err(|e| FrfitError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    std::fs::write(path, text + "\n").map_err(|e| FrfitError::io(path, e))
+}
+
 fn run_random(a: RandomArgs, quiet: bool) -> Result<(), FrfitError> {
     let t0 = Instant::now();
     let damping = {
@@ -213,12 +222,7 @@ fn run_random(a: RandomArgs, quiet: bool) -> Result<(), FrfitError> {
     ];
     frf_data::io::write_frf_csv(&a.out, &r.measured, &comments)?;
     if let Some(t) = &a.truth {
-        let truth = r.plant.to_truth(a.seed, 0.0, 0.0);
-        let text = serde_json::to_string_pretty(&truth).map_err(|e| FrfitError::Io {
-            path: t.display().to_string(),
-            message: e.to_string(),
-        })?;
-        std::fs::write(t, text + "\n").map_err(|e| FrfitError::io(t, e))?;
+        write_truth(t, &r.plant.to_truth(a.seed, 0.0, 0.0))?;
     }
     if let Some(p) = &a.noiseless {
         frf_data::io::write_frf_csv(
@@ -315,12 +319,7 @@ fn run_wafer(a: WaferArgs, quiet: bool) -> Result<(), FrfitError> {
     ];
     frf_data::io::write_frf_csv(&a.out, &est.frf, &comments)?;
     if let Some(t) = &a.truth {
-        let truth = w.stage.truth();
-        let text = serde_json::to_string_pretty(&truth).map_err(|e| FrfitError::Io {
-            path: t.display().to_string(),
-            message: e.to_string(),
-        })?;
-        std::fs::write(t, text + "\n").map_err(|e| FrfitError::io(t, e))?;
+        write_truth(t, &w.stage.truth())?;
     }
     if let Some(p) = &a.noiseless {
         let mut f = w.experiment.true_frf()?;
