@@ -155,25 +155,14 @@ fn accuracy(model: &Path, r: &RandomModal) -> Result<Accuracy, Error> {
     let median_error = e[e.len() / 2];
     let true_f: Vec<f64> = r.plant.modes.iter().map(|m| m.f_hz).collect();
     let fit_f: Vec<f64> = mf.modes.iter().map(|m| m.f_hz).collect();
-    // one-to-one, nearest first, within 0.1 %
-    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
-    for (i, &ft) in true_f.iter().enumerate() {
-        for (j, &ff) in fit_f.iter().enumerate() {
-            let d = (ff - ft).abs() / ft;
-            if d <= 1e-3 {
-                pairs.push((d, i, j));
-            }
-        }
-    }
-    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let (mut ut, mut uf, mut found) = (vec![false; true_f.len()], vec![false; fit_f.len()], 0);
-    for (_, i, j) in pairs {
-        if !ut[i] && !uf[j] {
-            ut[i] = true;
-            uf[j] = true;
-            found += 1;
-        }
-    }
+    // one-to-one, nearest first (the matching of the wafer-stage validation); the
+    // matches within 0.1 % are the same as those of a matching within 0.1 %, since the
+    // closest pairs are taken first
+    let found = crate::validate::match_modes(&true_f, &fit_f)
+        .iter()
+        .zip(&true_f)
+        .filter(|(m, &ft)| m.is_some_and(|j| (fit_f[j] - ft).abs() / ft <= 1e-3))
+        .count();
     Ok(Accuracy {
         found,
         modes: true_f.len(),

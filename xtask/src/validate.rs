@@ -154,7 +154,7 @@ fn rel_frobenius(
 
 /// One-to-one matching of fitted to true modes by nearest relative frequency (closest
 /// pairs first), within 5 %: for each true mode the index of its fitted mode.
-fn match_modes(true_f: &[f64], fit_f: &[f64]) -> Vec<Option<usize>> {
+pub(crate) fn match_modes(true_f: &[f64], fit_f: &[f64]) -> Vec<Option<usize>> {
     let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
     for (i, &ft) in true_f.iter().enumerate() {
         for (j, &ff) in fit_f.iter().enumerate() {
