@@ -42,7 +42,7 @@ pub use estimator::{Convergence, Estimator, Fit, Progress, ProgressFn, ProgressS
 pub use frf::Frf;
 pub use model::ModelStructure;
 pub use view::FrfView;
-pub use weighting::Weighting;
+pub use weighting::{proportional_groups, WeightGroup, Weighting};
 
 /// Complex double (the same type as `faer::c64` and `realize::C64`).
 pub type C64 = num_complex::Complex<f64>;

@@ -197,3 +197,106 @@ mod tests {
         );
     }
 }
+
+/// Entries of `vec(G)` whose weights over the lines are proportional: one group's
+/// weighted least-squares problems share their regressor up to a scalar per entry
+/// (the scalar does not change the solution), so one factorisation serves them all.
+///
+/// With the measured variance of a multivariable FRF the variances of the entries are
+/// often equal (one noise level per experiment) or differ by a constant per entry (a
+/// sensor gain), and with uniform weights every entry is in one group; with per-entry
+/// spectra the groups are single entries and nothing is shared.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WeightGroup {
+    /// The entries of the group (indices into `vec(G)`), ascending.
+    pub entries: Vec<usize>,
+    /// The group's weight of each line, scaled so that its largest is 1.
+    pub line_weights: Vec<f64>,
+    /// Per entry of [`WeightGroup::entries`]: its weights are `scale * line_weights`.
+    pub scales: Vec<f64>,
+}
+
+/// Groups the entries of the weights `w` (line after line, each line the `m` entries
+/// of `vec(G)`, as [`Weighting::weights`] returns them) whose weight vectors over the
+/// lines are proportional within a relative `tol` on every line ([`WeightGroup`]).
+/// Groups are ordered by their first entry. An entry whose weights are all zero is a
+/// group of its own, with scale 1.
+pub fn proportional_groups(w: &[f64], m: usize, tol: f64) -> Vec<WeightGroup> {
+    if m == 0 {
+        return Vec::new();
+    }
+    let nl = w.len() / m;
+    let mut groups: Vec<WeightGroup> = Vec::new();
+    for e in 0..m {
+        let col = |k: usize| w[k * m + e].max(0.0);
+        let top = (0..nl).map(col).fold(0.0f64, f64::max);
+        if !(top > 0.0 && top.is_finite()) {
+            groups.push(WeightGroup {
+                entries: vec![e],
+                line_weights: (0..nl)
+                    .map(|k| if top.is_finite() { col(k) } else { 0.0 })
+                    .collect(),
+                scales: vec![1.0],
+            });
+            continue;
+        }
+        let found = groups.iter_mut().find(|g| {
+            g.line_weights.iter().any(|&x| x > 0.0)
+                && (0..nl).all(|k| {
+                    (col(k) / top - g.line_weights[k]).abs()
+                        <= tol * g.line_weights[k].max(col(k) / top)
+                })
+        });
+        match found {
+            Some(g) => {
+                g.entries.push(e);
+                g.scales.push(top);
+            }
+            None => groups.push(WeightGroup {
+                entries: vec![e],
+                line_weights: (0..nl).map(|k| col(k) / top).collect(),
+                scales: vec![top],
+            }),
+        }
+    }
+    groups
+}
+
+#[cfg(test)]
+mod group_tests {
+    use super::proportional_groups;
+
+    #[test]
+    fn proportional_columns_share_a_group_and_others_do_not() {
+        // 3 lines, 4 entries: entries 0 and 2 proportional (x3), 1 different, 3 zero
+        let m = 4;
+        let w = [
+            1.0, 1.0, 3.0, 0.0, //
+            2.0, 1.0, 6.0, 0.0, //
+            4.0, 5.0, 12.0, 0.0,
+        ];
+        let g = proportional_groups(&w, m, 1e-12);
+        assert_eq!(g.len(), 3);
+        assert_eq!(g[0].entries, vec![0, 2]);
+        assert_eq!(g[0].line_weights, vec![0.25, 0.5, 1.0]);
+        assert_eq!(g[0].scales, vec![4.0, 12.0]);
+        assert_eq!(g[1].entries, vec![1]);
+        assert_eq!(g[2].entries, vec![3]);
+        assert_eq!(g[2].line_weights, vec![0.0; 3]);
+        // the weights are reproduced
+        for gr in &g {
+            for (i, &e) in gr.entries.iter().enumerate() {
+                for k in 0..3 {
+                    assert_eq!(gr.scales[i] * gr.line_weights[k], w[k * m + e]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_difference_beyond_the_tolerance_splits_the_group() {
+        let w = [1.0, 1.0, 1.0, 1.0 + 1e-6];
+        assert_eq!(proportional_groups(&w, 2, 1e-9).len(), 2);
+        assert_eq!(proportional_groups(&w, 2, 1e-5).len(), 1);
+    }
+}

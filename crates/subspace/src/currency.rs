@@ -11,7 +11,8 @@
 //! The residue matrices, the rigid-body coefficients and the feedthrough are then fitted
 //! by linear least squares on the data, with the weights of the chain's criterion and
 //! the currency's own response (every known factor and the exact hold included), entry
-//! by entry: for a zero-order-hold plant and exact poles this reproduces the data
+//! by entry (entries whose weights are proportional share one QR of their common
+//! regressor, [`frf_data::proportional_groups`]): for a zero-order-hold plant and exact poles this reproduces the data
 //! exactly, and it is the best fit of the currency for those poles. The residues are
 //! full matrices (their numerical rank is what the data give).
 
@@ -20,6 +21,7 @@ use crate::realization::condition;
 use crate::SubspaceError;
 use faer::linalg::solvers::SolveLstsq;
 use faer::Mat;
+use rayon::prelude::*;
 use realize::{FrfModel, KnownFactors, ModalModel, PolePair, RealPole, C64};
 use serde::{Deserialize, Serialize};
 
@@ -323,56 +325,73 @@ pub fn fit_residues(
         })
         .collect();
     modal.rigid = (0..ps.integrators).map(|_| Mat::zeros(ny, nu)).collect();
-    let mut worst = 1.0f64;
-    let mut a = Mat::<f64>::zeros(2 * nl, nb);
-    let mut y = Mat::<f64>::zeros(2 * nl, 1);
-    for e in 0..m {
-        let (i, j) = (e % ny, e / ny);
-        for k in 0..nl {
-            let sw = w[k * m + e].max(0.0).sqrt();
-            for (q, col) in basis.iter().enumerate() {
-                a[(2 * k, q)] = col[k].re * sw;
-                a[(2 * k + 1, q)] = col[k].im * sw;
-            }
-            y[(2 * k, 0)] = g[k * m + e].re * sw;
-            y[(2 * k + 1, 0)] = g[k * m + e].im * sw;
-        }
-        let scale: Vec<f64> = (0..nb)
-            .map(|q| {
-                let s = (0..2 * nl)
-                    .map(|r| a[(r, q)] * a[(r, q)])
-                    .sum::<f64>()
-                    .sqrt();
-                if s > 0.0 {
-                    s
-                } else {
-                    1.0
+    // entries with proportional weights share their regressor: one QR per group, the
+    // groups in parallel
+    let groups = frf_data::proportional_groups(w, m, 1e-12);
+    let solved: Vec<Result<(Mat<f64>, f64), SubspaceError>> = groups
+        .par_iter()
+        .map(|grp| {
+            let mut a = Mat::<f64>::zeros(2 * nl, nb);
+            let mut y = Mat::<f64>::zeros(2 * nl, grp.entries.len());
+            for k in 0..nl {
+                let sw = grp.line_weights[k].sqrt();
+                for (q, col) in basis.iter().enumerate() {
+                    a[(2 * k, q)] = col[k].re * sw;
+                    a[(2 * k + 1, q)] = col[k].im * sw;
                 }
-            })
-            .collect();
-        for q in 0..nb {
-            for r in 0..2 * nl {
-                a[(r, q)] /= scale[q];
+                for (c, &e) in grp.entries.iter().enumerate() {
+                    y[(2 * k, c)] = g[k * m + e].re * sw;
+                    y[(2 * k + 1, c)] = g[k * m + e].im * sw;
+                }
             }
-        }
-        let qr = a.qr();
-        worst = worst.max(condition(&qr.thin_R().to_owned()));
-        let x = qr.solve_lstsq(&y);
-        let mut re_part = vec![0.0; ps.pairs.len()];
-        for (q, t) in terms.iter().enumerate() {
-            let v = x[(q, 0)] / scale[q];
-            if !v.is_finite() {
-                return Err(SubspaceError::numerical(
-                    "least squares of the residues",
-                    format!("non-finite coefficient for entry ({}, {})", i + 1, j + 1),
-                ));
+            let scale: Vec<f64> = (0..nb)
+                .map(|q| {
+                    let s = a.col(q).norm_l2();
+                    if s > 0.0 {
+                        s
+                    } else {
+                        1.0
+                    }
+                })
+                .collect();
+            for (q, &s) in scale.iter().enumerate() {
+                for r in 0..2 * nl {
+                    a[(r, q)] /= s;
+                }
             }
-            match *t {
-                Term::PairRe(p) => re_part[p] = v,
-                Term::PairIm(p) => modal.pairs[p].residue[(i, j)] = C64::new(re_part[p], v),
-                Term::Real(p) => modal.real_poles[p].residue[(i, j)] = v,
-                Term::Rigid(kk) => modal.rigid[kk][(i, j)] = v,
-                Term::Feedthrough => modal.feedthrough[(i, j)] = v,
+            let qr = a.qr();
+            let cond = condition(&qr.thin_R().to_owned());
+            let mut x = qr.solve_lstsq(&y);
+            for (q, &s) in scale.iter().enumerate() {
+                for c in 0..x.ncols() {
+                    x[(q, c)] /= s;
+                }
+            }
+            Ok((x, cond))
+        })
+        .collect();
+    let mut worst = 1.0f64;
+    for (grp, res) in groups.iter().zip(solved) {
+        let (x, cond) = res?;
+        worst = worst.max(cond);
+        for (c, &e) in grp.entries.iter().enumerate() {
+            let (i, j) = (e % ny, e / ny);
+            let mut re_part = vec![0.0; ps.pairs.len()];
+            for (q, t) in terms.iter().enumerate() {
+                let v = x[(q, c)];
+                if !v.is_finite() {
+                    return Err(SubspaceError::numerical(
+                        "least squares of the residues",
+                        format!("non-finite coefficient for entry ({}, {})", i + 1, j + 1),
+                    ));
+                }
+                match *t {
+                    Term::PairRe(p) => re_part[p] = v,
+                    Term::PairIm(p) => modal.pairs[p].residue[(i, j)] = C64::new(re_part[p], v),
+                    Term::Real(p) => modal.real_poles[p].residue[(i, j)] = v,
+                    Term::Rigid(kk) => modal.rigid[kk][(i, j)] = v,
+                    Term::Feedthrough => modal.feedthrough[(i, j)] = v,
+                }
             }
         }
     }

@@ -83,11 +83,23 @@ pub fn fit_b_d(
             }
         }
     };
-    for j in 0..nu {
+    // input columns whose weights are proportional share the regressor (phi does not
+    // depend on the column): one running QR with their data as right-hand sides
+    let mut wcols = vec![0.0; nl * p * nu];
+    for k in 0..nl {
+        for o in 0..p {
+            for j in 0..nu {
+                wcols[(k * p + o) * nu + j] = weight(k, j * p + o);
+            }
+        }
+    }
+    for grp in frf_data::proportional_groups(&wcols, nu, 1e-12) {
+        let lw = |k: usize, o: usize| grp.line_weights[k * p + o];
+        let ng = grp.entries.len();
         let mut scale = vec![0.0; nc];
         for k in 0..nl {
             for o in 0..p {
-                let w = weight(k, j * p + o);
+                let w = lw(k, o);
                 for l in 0..n {
                     scale[l] += w * phi(k, o, l).norm_sqr();
                 }
@@ -97,14 +109,14 @@ pub fn fit_b_d(
         for s in scale.iter_mut() {
             *s = if *s > 0.0 { s.sqrt() } else { 1.0 };
         }
-        let mut r = Mat::<f64>::zeros(nc + 1, nc + 1);
-        let mut block = Mat::<f64>::zeros(2 * blk * p, nc + 1);
+        let mut r = Mat::<f64>::zeros(nc + ng, nc + ng);
+        let mut block = Mat::<f64>::zeros(2 * blk * p, nc + ng);
         let mut k0 = 0;
         while k0 < nl {
             let k1 = (k0 + blk).min(nl);
             for k in k0..k1 {
                 for o in 0..p {
-                    let sw = weight(k, j * p + o).sqrt();
+                    let sw = lw(k, o).sqrt();
                     let (re, im) = (2 * ((k - k0) * p + o), 2 * ((k - k0) * p + o) + 1);
                     for l in 0..n {
                         let f = phi(k, o, l) * (sw / scale[l]);
@@ -116,9 +128,11 @@ pub fn fit_b_d(
                         block[(re, n + q)] = v;
                         block[(im, n + q)] = 0.0;
                     }
-                    let h = d.h[k * p * nu + j * p + o] * sw;
-                    block[(re, nc)] = h.re;
-                    block[(im, nc)] = h.im;
+                    for (c, &j) in grp.entries.iter().enumerate() {
+                        let h = d.h[k * p * nu + j * p + o] * sw;
+                        block[(re, nc + c)] = h.re;
+                        block[(im, nc + c)] = h.im;
+                    }
                 }
             }
             r = crate::projection::absorb(&r, &block, 2 * p * (k1 - k0))?;
@@ -126,22 +140,29 @@ pub fn fit_b_d(
         }
         let rr = Mat::from_fn(nc, nc, |a, b| r[(a, b)]);
         worst = worst.max(condition(&rr));
-        // back substitution R x = R[:, nc]
-        let mut x = vec![0.0; nc];
-        for i in (0..nc).rev() {
-            let mut acc = r[(i, nc)];
-            for q in i + 1..nc {
-                acc -= r[(i, q)] * x[q];
+        for (c, &j) in grp.entries.iter().enumerate() {
+            // back substitution R x = R[:, nc + c]
+            let mut x = vec![0.0; nc];
+            for i in (0..nc).rev() {
+                let mut acc = r[(i, nc + c)];
+                for q in i + 1..nc {
+                    acc -= r[(i, q)] * x[q];
+                }
+                x[i] = acc / r[(i, i)];
             }
-            x[i] = acc / r[(i, i)];
+            for l in 0..n {
+                b[(l, j)] = x[l] / scale[l];
+            }
+            for o in 0..p {
+                dd[(o, j)] = x[n + o] / scale[n + o];
+            }
         }
-        for l in 0..n {
-            b[(l, j)] = x[l] / scale[l];
+        // the residuals of the group: the lower-right triangle (Frobenius norm), each
+        // column back at its own weight scale
+        for c in 0..ng {
+            let col2: f64 = (nc..=nc + c).map(|i| r[(i, nc + c)].powi(2)).sum();
+            cost += col2 * grp.scales[c];
         }
-        for o in 0..p {
-            dd[(o, j)] = x[n + o] / scale[n + o];
-        }
-        cost += r[(nc, nc)] * r[(nc, nc)];
     }
     if (0..nu).any(|j| (0..n).any(|l| !b[(l, j)].is_finite())) {
         return Err(SubspaceError::numerical(
