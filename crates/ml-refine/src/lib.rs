@@ -24,6 +24,7 @@ pub mod jacobian;
 pub mod lm;
 mod qr;
 pub mod refine;
+mod shared;
 pub mod stats;
 pub mod varpro;
 

@@ -74,6 +74,14 @@ pub struct MlConfig {
     /// Smallest F statistic (cost explained per added parameter over the noise scale)
     /// for an added mode to be kept. Default: 25.
     pub min_f: f64,
+    /// Times an optimum with unstable poles, or with a pole the data do not determine
+    /// (the weakest direction of an information matrix beyond `max_condition`), is
+    /// answered by dropping those poles (the start had a pole too many: an initialiser
+    /// fitting noise at a high order) and refining again from the optimum without them;
+    /// the cost test may then add a mode back where the residual calls for one. The
+    /// drops are reported in the messages. Default: 3; 0 reports the unstable or
+    /// unidentifiable optimum as an error.
+    pub unstable_drops: usize,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -91,6 +99,7 @@ impl Default for MlConfig {
             max_condition: 1e13,
             add_modes: 4,
             min_f: 25.0,
+            unstable_drops: 3,
             progress: ProgressSink::none(),
         }
     }
@@ -268,9 +277,23 @@ impl Estimator for MlRefine {
         data: &D,
         start: ChainModel,
     ) -> Result<Fit<FrfModel, MlReport>, MlError> {
+        self.estimate_from(data, start.model, 0, Vec::new())
+    }
+}
+
+impl MlRefine {
+    /// [`Estimator::estimate`] from `model`, after `drops` refinements that ended
+    /// unstable (see [`MlConfig::unstable_drops`]) whose messages are `carried`.
+    fn estimate_from<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        model: FrfModel,
+        drops: usize,
+        carried: Vec<String>,
+    ) -> Result<Fit<FrfModel, MlReport>, MlError> {
         let t0 = Instant::now();
         let cfg = &self.config;
-        let mut model = start.model;
+        let mut model = model;
         if data.ny() != model.ny() || data.nu() != model.nu() {
             return Err(MlError::invalid(
                 "start model",
@@ -279,7 +302,7 @@ impl Estimator for MlRefine {
             ));
         }
         model.validate()?;
-        let mut messages = Vec::new();
+        let mut messages = carried;
         // the start: stable poles, pairs above the real axis
         for p in &mut model.modal.pairs {
             if p.pole.im.is_nan() || p.pole.im <= 0.0 {
@@ -505,6 +528,21 @@ impl Estimator for MlRefine {
                 bad.push(format!("dynamics factor {k} ({:?})", d.target));
             }
         }
+        let dynamics_stable = fitted.factors.dynamics.iter().all(|d| d.is_stable());
+        if !bad.is_empty() && drops < cfg.unstable_drops && dynamics_stable {
+            let mut next = fitted.clone();
+            next.modal.pairs.retain(|p| p.pole.re < 0.0);
+            next.modal.real_poles.retain(|p| p.pole < 0.0);
+            if next.modal.pairs.len() + next.modal.real_poles.len() + next.modal.rigid.len() > 0 {
+                messages.push(format!(
+                    "the optimum had unstable poles ({}) after {} iterations ({}): poles the data do not support; dropped, and refined again from that optimum",
+                    bad.join(", "),
+                    out.iterations,
+                    out.convergence.describe()
+                ));
+                return self.estimate_from(data, next, drops + 1, messages);
+            }
+        }
         if !bad.is_empty() {
             return Err(MlError::Unstable {
                 poles: bad.join(", "),
@@ -543,7 +581,27 @@ impl Estimator for MlRefine {
                 condition: f64::INFINITY,
                 hint: "check the data for non-finite values".into(),
             })?;
-        if n_nl > 0 && (cond.is_nan() || cond > cfg.max_condition) {
+        let unidentifiable = n_nl > 0 && (cond.is_nan() || cond > cfg.max_condition);
+        if unidentifiable && drops < cfg.unstable_drops && weakest < 2 * np + lay.n_real {
+            // a pole the data do not determine (a spurious real pole running off to
+            // infinity, a mode without residue): dropped, and refined again
+            let mut next = fitted.clone();
+            let what = describe_param(&lay, &out.theta, weakest, &fitted);
+            if weakest < 2 * np {
+                next.modal.pairs.remove(weakest / 2);
+            } else {
+                next.modal.real_poles.remove(weakest - 2 * np);
+            }
+            if next.modal.pairs.len() + next.modal.real_poles.len() + next.modal.rigid.len() > 0 {
+                messages.push(format!(
+                    "{what} is not determined by the data (information matrix condition {cond:.2e}) after {} iterations ({}): dropped, and refined again from that optimum",
+                    out.iterations,
+                    out.convergence.describe()
+                ));
+                return self.estimate_from(data, next, drops + 1, messages);
+            }
+        }
+        if unidentifiable {
             return Err(MlError::Unidentifiable {
                 what: describe_param(&lay, &out.theta, weakest, &fitted),
                 condition: cond,

@@ -18,10 +18,16 @@
 //! the linear block is exactly `sum_e J_e^T J_e`: the inverse of the merged `R^T R` is the
 //! marginal covariance of the nonlinear parameters (McKelvey eq. (31)-(32) with the
 //! measured variance as the fixed noise model).
+//!
+//! When the entries' weights are proportional (one noise level, uniform weights) and
+//! no dynamics factor acts on part of the entries, every entry has the same regressor:
+//! [`crate::shared`] then factorises once per group of entries instead of once per
+//! entry, which is what makes large MIMO FRFs (hundreds of entries) affordable.
 
 use crate::basis::{first_order, first_order_pair, powers, rigid_bases, zoh_ts};
 use crate::gram::{gram_lstsq, gram_r, gram_r_with};
 use crate::qr::{back_substitute, householder_r};
+use crate::shared::Shared;
 use crate::C64;
 use rayon::prelude::*;
 use realize::{FrfModel, PolePair, RealPole};
@@ -131,17 +137,20 @@ pub(crate) struct Problem {
     pub ts: Option<f64>,
     /// Rigid-body bases, `N x n_rigid` (fixed).
     rigid: Vec<C64>,
+    /// The groups of entries with proportional weights, when sharing pays and there
+    /// are no dynamics factors ([`crate::shared`]).
+    pub(crate) shared: Option<Shared>,
 }
 
 /// The per-line values of the bases for one nonlinear parameter vector.
-struct Lines {
+pub(crate) struct Lines {
     /// `F phi_l`, `N x n_lc`.
-    fphi: Vec<C64>,
+    pub fphi: Vec<C64>,
     /// `F d phi / d (Re p, Im p)` per pair and column: index
     /// `((k * n_pairs + q) * 2 + ab) * cpp + c`.
-    dpair: Vec<C64>,
+    pub dpair: Vec<C64>,
     /// `F d phi / d p` per real pole, `N x n_real`.
-    dreal: Vec<C64>,
+    pub dreal: Vec<C64>,
     /// Per dynamics factor and line: `(B/A, A)`, index `k * n_dyn + d`.
     dynv: Vec<(C64, C64)>,
     /// Per dynamics factor, line-major: `x^1..x^n` with `n = max(den, num)`.
@@ -186,6 +195,11 @@ impl Problem {
             rigid_bases(lay.n_rigid, w, ts, &mut rb);
             rigid.extend_from_slice(&rb);
         }
+        let shared = if template.factors.dynamics.is_empty() {
+            Shared::new(&sw, &g, lay.m())
+        } else {
+            None
+        };
         Self {
             lay,
             omega,
@@ -194,7 +208,21 @@ impl Problem {
             template,
             ts,
             rigid,
+            shared,
         }
+    }
+
+    /// The same problem without the shared-weight path (tests compare the two).
+    #[cfg(test)]
+    pub(crate) fn per_entry(mut self) -> Self {
+        self.shared = None;
+        self
+    }
+
+    /// True when the shared-weight path is in use.
+    #[cfg(test)]
+    pub(crate) fn is_shared(&self) -> bool {
+        self.shared.is_some()
     }
 
     pub fn n_lines(&self) -> usize {
@@ -277,7 +305,7 @@ impl Problem {
         (fphi, dpair, dreal)
     }
 
-    fn lines(&self, theta: &[f64]) -> Lines {
+    pub(crate) fn lines(&self, theta: &[f64]) -> Lines {
         let n = self.n_lines();
         let f = self.factors(theta);
         let nd = f.dynamics.len();
@@ -356,6 +384,9 @@ impl Problem {
     /// Solves the linear problem of every entry at `theta`: the cost and the linear
     /// parameters, or the first entry whose basis is (numerically) rank deficient.
     pub fn evaluate(&self, theta: &[f64]) -> Result<Eval, Singular> {
+        if let Some(sh) = &self.shared {
+            return self.evaluate_shared(sh, theta);
+        }
         let lines = self.lines(theta);
         let lay = &self.lay;
         let (m, n_lin) = (lay.m(), lay.n_lin());
@@ -425,6 +456,11 @@ impl Problem {
     /// and the norms of the Jacobian's columns before the projection (a column that the
     /// projection almost cancels belongs to a parameter the linear terms can imitate).
     pub fn jacobian_r(&self, theta: &[f64], ev: &Eval) -> (Vec<f64>, Vec<f64>) {
+        if let Some(sh) = &self.shared {
+            if let Some(out) = self.jacobian_shared(sh, theta, ev) {
+                return out;
+            }
+        }
         let lines = self.lines(theta);
         let lay = &self.lay;
         let (n, m, n_lin, n_lc, n_nl) =
