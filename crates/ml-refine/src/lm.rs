@@ -131,7 +131,10 @@ const ROUNDING_COST: f64 = 1e-24;
 /// Runs the iterations from `theta0` (whose evaluation is `eval0`); `dof` is the number
 /// of residual degrees of freedom `N_dof` of the cost (for the step test in standard
 /// deviations). `valid` rejects a trial point outside the parameter domain (a pole
-/// pair crossing the real axis).
+/// pair crossing the real axis). `leaving` names a parameter that has left the region
+/// where the model means what it says (a pole crossing into the right half-plane, a
+/// real pole running off to infinity): the iteration then stops at once with
+/// [`Convergence::Failed`] saying so, and the caller decides (it drops the pole).
 pub(crate) fn iterate(
     prob: &Problem,
     theta0: Vec<f64>,
@@ -139,6 +142,7 @@ pub(crate) fn iterate(
     dof: f64,
     s: &LmSettings,
     valid: impl Fn(&[f64]) -> bool,
+    leaving: impl Fn(&[f64]) -> Option<String>,
     progress: &ProgressSink,
 ) -> LmOutcome {
     let n = theta0.len();
@@ -246,6 +250,10 @@ pub(crate) fn iterate(
         ev = e2;
         hist.push(ev.cost);
         lambda = (lambda / 5.0).max(1e-12);
+        if let Some(reason) = leaving(&theta) {
+            conv = Convergence::Failed { reason };
+            break;
+        }
         (r, vnorm) = jacobian(&theta, &ev, &mut work);
         progress.step(
             "ml",

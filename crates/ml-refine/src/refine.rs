@@ -82,6 +82,10 @@ pub struct MlConfig {
     /// drops are reported in the messages. Default: 3; 0 reports the unstable or
     /// unidentifiable optimum as an error.
     pub unstable_drops: usize,
+    /// With a measured variance, drop a start real pole that explains less than
+    /// `min_f` times the noise per parameter (see [`MlRefine`]'s messages). Default:
+    /// true.
+    pub prune_real_poles: bool,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -100,9 +104,29 @@ impl Default for MlConfig {
             add_modes: 4,
             min_f: 25.0,
             unstable_drops: 3,
+            prune_real_poles: true,
             progress: ProgressSink::none(),
         }
     }
+}
+
+/// The nonlinear start vector of `model` in the order of `lay`: the poles of the pairs
+/// (real and imaginary parts), the real poles, the delay, the dynamics coefficients.
+fn nonlinear_start(model: &FrfModel, lay: &Layout) -> Vec<f64> {
+    let mut theta = Vec::with_capacity(lay.n_nl());
+    for p in &model.modal.pairs {
+        theta.push(p.pole.re);
+        theta.push(p.pole.im);
+    }
+    theta.extend(model.modal.real_poles.iter().map(|p| p.pole));
+    if lay.delay {
+        theta.push(model.factors.delay_s);
+    }
+    for d in &model.factors.dynamics {
+        theta.extend_from_slice(&d.den);
+        theta.extend_from_slice(&d.num);
+    }
+    theta
 }
 
 /// A mode's natural frequency and damping with their standard deviations.
@@ -388,19 +412,55 @@ impl MlRefine {
                 params: n_params,
             });
         }
-        // the nonlinear start vector
-        let mut theta = Vec::with_capacity(lay.n_nl());
-        for p in &model.modal.pairs {
-            theta.push(p.pole.re);
-            theta.push(p.pole.im);
-        }
-        theta.extend(model.modal.real_poles.iter().map(|p| p.pole));
-        if lay.delay {
-            theta.push(model.factors.delay_s);
-        }
-        for d in &model.factors.dynamics {
-            theta.extend_from_slice(&d.den);
-            theta.extend_from_slice(&d.num);
+        let theta = nonlinear_start(&model, &lay);
+        if measured && cfg.prune_real_poles && !model.modal.real_poles.is_empty() {
+            // a start real pole that explains less than `min_f` times the noise per
+            // parameter (the residues of every entry and the pole) is dropped before the
+            // iterations: an initialiser at a high order fits noise with real poles,
+            // which the iterations then push unstable or off to infinity
+            let prob0 = Problem::new(
+                lay.clone(),
+                data.omegas(),
+                data.values_vec(),
+                sw.clone(),
+                model.clone(),
+            );
+            if let Ok(ev0) = prob0.evaluate(&theta) {
+                let mut weakest: Option<(usize, f64)> = None;
+                for r in 0..model.modal.real_poles.len() {
+                    let mut m2 = model.clone();
+                    m2.modal.real_poles.remove(r);
+                    let lay2 = Layout {
+                        n_real: lay.n_real - 1,
+                        ..lay.clone()
+                    };
+                    let p2 = Problem::new(
+                        lay2.clone(),
+                        data.omegas(),
+                        data.values_vec(),
+                        sw.clone(),
+                        m2.clone(),
+                    );
+                    if let Ok(ev2) = p2.evaluate(&nonlinear_start(&m2, &lay2)) {
+                        let f = (ev2.cost - ev0.cost) / (lay.m() + 1) as f64;
+                        if weakest.is_none_or(|(_, fw)| f < fw) {
+                            weakest = Some((r, f));
+                        }
+                    }
+                }
+                if let Some((r, f)) = weakest.filter(|(_, f)| *f < cfg.min_f) {
+                    let pole = model.modal.real_poles[r].pole;
+                    let mut m2 = model.clone();
+                    m2.modal.real_poles.remove(r);
+                    if m2.modal.pairs.len() + m2.modal.real_poles.len() + m2.modal.rigid.len() > 0 {
+                        messages.push(format!(
+                            "start real pole at {pole:.3e} rad/s explains {f:.2} times the noise per parameter (< {}): dropped before the iterations",
+                            cfg.min_f
+                        ));
+                        return self.estimate_from(data, m2, drops, messages);
+                    }
+                }
+            }
         }
         let prob = Problem::new(
             lay.clone(),
@@ -423,6 +483,36 @@ impl MlRefine {
         let valid = |np: usize| {
             move |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0)
         };
+        // a pole that crosses into the right half-plane, or a real pole beyond 1e4 times
+        // the highest line (a constant in the band: the feedthrough's job), stops the
+        // iterations; the pole is then dropped (`unstable_drops`)
+        let w_top = data.omegas().iter().cloned().fold(0.0f64, f64::max);
+        let leaving = |np: usize, nr: usize| {
+            move |t: &[f64]| -> Option<String> {
+                for q in 0..np {
+                    if t[2 * q] >= 0.0 {
+                        return Some(format!(
+                            "the mode at {:.2} Hz crossed into the right half-plane",
+                            t[2 * q + 1] / TAU
+                        ));
+                    }
+                }
+                for r in 0..nr {
+                    let p = t[2 * np + r];
+                    if p >= 0.0 {
+                        return Some(format!(
+                            "a real pole crossed into the right half-plane ({p:.3e} rad/s)"
+                        ));
+                    }
+                    if p < -1e4 * w_top {
+                        return Some(format!(
+                            "a real pole ran off to {p:.3e} rad/s (1e4 times the band)"
+                        ));
+                    }
+                }
+                None
+            }
+        };
         let t_iter = Instant::now();
         let mut out = iterate(
             &prob,
@@ -431,6 +521,7 @@ impl MlRefine {
             (n * m) as f64 - n_params as f64 / 2.0,
             &cfg.lm,
             valid(lay.n_pairs),
+            leaving(lay.n_pairs, lay.n_real),
             &cfg.progress,
         );
         let mut work = out.work;
@@ -483,6 +574,7 @@ impl MlRefine {
                 dof2,
                 &cfg.lm,
                 valid(lay2.n_pairs),
+                leaving(lay2.n_pairs, lay2.n_real),
                 &cfg.progress,
             );
             work = work.add(out2.work);
@@ -529,14 +621,29 @@ impl MlRefine {
             }
         }
         let dynamics_stable = fitted.factors.dynamics.iter().all(|d| d.is_stable());
-        if !bad.is_empty() && drops < cfg.unstable_drops && dynamics_stable {
+        let w_top = data.omegas().iter().cloned().fold(0.0f64, f64::max);
+        let far: Vec<String> = fitted
+            .modal
+            .real_poles
+            .iter()
+            .filter(|p| p.pole < -1e4 * w_top)
+            .map(|p| {
+                format!(
+                    "real pole at {:.3e} rad/s, 1e4 times beyond the band",
+                    p.pole
+                )
+            })
+            .collect();
+        if !(bad.is_empty() && far.is_empty()) && drops < cfg.unstable_drops && dynamics_stable {
             let mut next = fitted.clone();
             next.modal.pairs.retain(|p| p.pole.re < 0.0);
-            next.modal.real_poles.retain(|p| p.pole < 0.0);
+            next.modal
+                .real_poles
+                .retain(|p| p.pole < 0.0 && p.pole >= -1e4 * w_top);
             if next.modal.pairs.len() + next.modal.real_poles.len() + next.modal.rigid.len() > 0 {
                 messages.push(format!(
-                    "the optimum had unstable poles ({}) after {} iterations ({}): poles the data do not support; dropped, and refined again from that optimum",
-                    bad.join(", "),
+                    "the optimum had poles the data do not support ({}) after {} iterations ({}): dropped, and refined again from that optimum",
+                    bad.iter().chain(&far).cloned().collect::<Vec<_>>().join(", "),
                     out.iterations,
                     out.convergence.describe()
                 ));
