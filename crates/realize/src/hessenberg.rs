@@ -362,25 +362,62 @@ impl HessenbergForm {
 }
 
 /// Evaluates `hf` at every point of `points` into a grid; `omega_of(k)` is the angular
-/// frequency reported when point `k` is a pole.
+/// frequency reported when point `k` is a pole. Large grids (many points of a large
+/// state) are evaluated in blocks of points on the rayon pool: the points are
+/// independent.
 pub(crate) fn eval_grid(
     hf: &HessenbergForm,
     points: impl ExactSizeIterator<Item = C64>,
-    omega_of: impl Fn(usize) -> f64,
+    omega_of: impl Fn(usize) -> f64 + Sync,
 ) -> Result<crate::ResponseGrid, RealizeError> {
-    let mut g = crate::ResponseGrid::zeros(points.len(), hf.ny, hf.nu);
-    let mut work = HessenbergWork::default();
-    for (k, x) in points.enumerate() {
-        if !(x.re.is_finite() && x.im.is_finite()) {
-            return Err(RealizeError::NonFinite {
-                what: format!("evaluation point {k}"),
-            });
+    let pts: Vec<C64> = points.collect();
+    let mut g = crate::ResponseGrid::zeros(pts.len(), hf.ny, hf.nu);
+    if let Some(k) = pts
+        .iter()
+        .position(|x| !(x.re.is_finite() && x.im.is_finite()))
+    {
+        return Err(RealizeError::NonFinite {
+            what: format!("evaluation point {k}"),
+        });
+    }
+    let m = hf.ny * hf.nu;
+    // about n^2 (nu + 1) flops per point: blocks only where the work is worth a thread
+    let work_per_point = hf.n * hf.n * (hf.nu + 1);
+    let block = if m == 0 {
+        pts.len().max(1)
+    } else if work_per_point * pts.len() < PARALLEL_WORK {
+        pts.len().max(1)
+    } else {
+        PARALLEL_POINTS
+    };
+    let eval_block = |(b, out): (usize, &mut [C64])| -> Result<(), RealizeError> {
+        let mut work = HessenbergWork::default();
+        for (i, line) in out.chunks_mut(m.max(1)).enumerate() {
+            let k = b * block + i;
+            hf.eval_into(pts[k], &mut work, line)
+                .map_err(|Singular| RealizeError::AtPole {
+                    point: k,
+                    omega: omega_of(k),
+                })?;
         }
-        hf.eval_into(x, &mut work, g.line_mut(k))
-            .map_err(|Singular| RealizeError::AtPole {
-                point: k,
-                omega: omega_of(k),
-            })?;
+        Ok(())
+    };
+    if m == 0 {
+        return Ok(g);
+    }
+    if block >= pts.len() {
+        eval_block((0, &mut g.values[..]))?;
+    } else {
+        use rayon::prelude::*;
+        g.values
+            .par_chunks_mut(block * m)
+            .enumerate()
+            .try_for_each(eval_block)?;
     }
     Ok(g)
 }
+
+/// Work (flops) of a grid below which [`eval_grid`] stays on the calling thread.
+const PARALLEL_WORK: usize = 20_000_000;
+/// Points per parallel block of [`eval_grid`].
+const PARALLEL_POINTS: usize = 128;

@@ -129,15 +129,27 @@ pub struct FitOptions {
     /// Iterations: refined IV (riv) or SK.
     #[arg(long, value_enum, default_value_t = Method::Riv)]
     pub method: Method,
-    /// Initialiser of the estimator chain: `cmif` (CMIF peaks + convex numerators), a
-    /// comma-separated list of initialisers (each starts a chain; the one with the
-    /// smallest final prediction error is kept), or `auto` (every initialiser).
-    #[arg(long, default_value = "cmif", value_name = "NAME[,NAME..]|auto")]
+    /// Initialiser of the estimator chain: `cmif` (CMIF peaks + convex numerators),
+    /// `subspace`, `sk`, a comma-separated list of initialisers (each starts a chain; the
+    /// one with the smallest final prediction error is kept), or `auto` (every
+    /// initialiser). Default: `cmif` up to 100 entries (ny x nu), `subspace` above.
+    #[arg(
+        long,
+        default_value = "",
+        hide_default_value = true,
+        value_name = "NAME[,NAME..]|auto"
+    )]
     pub init: String,
     /// Refiner of the estimator chain: `riv` (refined IV with mode adaptation), `ml`
     /// (maximum likelihood with the standard deviations of the modes) or `none` (the
-    /// initialiser's model as it is).
-    #[arg(long, default_value = "riv", value_name = "NAME")]
+    /// initialiser's model as it is). Default: `riv` up to 100 entries (ny x nu), `ml`
+    /// above.
+    #[arg(
+        long,
+        default_value = "",
+        hide_default_value = true,
+        value_name = "NAME"
+    )]
     pub refine: String,
     /// Model order (number of states) for the initialisers that take one (sk,
     /// subspace); default: chosen from the data.

@@ -82,7 +82,12 @@ pub fn chain_fit(
         // reference files (a spurious second input_dynamics step on the input-lag case)
         complete_start: None,
     };
-    let result = run_chain(&ctx.band, &cfg.init, &cfg.refine, &settings, &opts)?;
+    let (init, refine) = super::default_chain(
+        &cfg.init,
+        &cfg.refine,
+        frf_data::FrfDataset::ny(&ctx.band) * frf_data::FrfDataset::nu(&ctx.band),
+    );
+    let result = run_chain(&ctx.band, &init, &refine, &settings, &opts)?;
     let model = match result.model.native::<AdditiveModel>() {
         Some(m) => m.clone(),
         None => {

@@ -104,9 +104,11 @@ pub struct PipelineConfig {
     /// A model to start from (from `--model MODEL.json`) instead of the CMIF
     /// initialisation.
     pub start_model: Option<AdditiveModel>,
-    /// The initialiser of the chain (see [`crate::chain::INITIALIZERS`]). Default: `cmif`.
+    /// The initialiser of the chain (see [`crate::chain::INITIALIZERS`]); empty: by the
+    /// size of the data ([`default_chain`]). Default: `cmif`.
     pub init: String,
-    /// The refiner of the chain (see [`crate::chain::REFINERS`]). Default: `riv`.
+    /// The refiner of the chain (see [`crate::chain::REFINERS`]); empty: by the size of
+    /// the data ([`default_chain`]). Default: `riv`.
     pub refine: String,
     /// Model order (number of states) for initialisers that take one (SK, subspace);
     /// `None` lets them choose it from the data. Default: `None`.
@@ -342,4 +344,45 @@ pub fn run(
         step_responses,
         summary,
     })
+}
+
+/// Entries (`ny x nu`) above which the default chain is `subspace -> ml` ([`default_chain`]).
+pub const LARGE_MIMO_ENTRIES: usize = 100;
+
+/// The default chain for an FRF with `entries` entries (`ny x nu`): `cmif -> riv` up to
+/// [`LARGE_MIMO_ENTRIES`] (the wafer-stage method: modes from CMIF peaks, refined IV),
+/// `subspace -> ml` above. With many entries and modes, peaks are many, close and
+/// hidden: the CMIF start misses or merges modes that the refined IV's adaptation does
+/// not recover (a 20 x 20 plant with 50 modes: 27 modes, 16 of them right), while the
+/// subspace start finds the poles without picking peaks and the ML refinement's cost
+/// per iteration is linear in lines x entries (one factorisation per group of entries
+/// with the same weights). An explicit `init` or `refine` is kept.
+pub fn default_chain(init: &str, refine: &str, entries: usize) -> (String, String) {
+    let large = entries > LARGE_MIMO_ENTRIES;
+    let pick = |given: &str, small: &str, big: &str| {
+        if !given.trim().is_empty() {
+            given.to_string()
+        } else if large {
+            big.to_string()
+        } else {
+            small.to_string()
+        }
+    };
+    (pick(init, "cmif", "subspace"), pick(refine, "riv", "ml"))
+}
+
+#[cfg(test)]
+mod default_chain_tests {
+    use super::*;
+
+    #[test]
+    fn the_default_chain_follows_the_size_and_keeps_explicit_choices() {
+        let s = |a: &str, b: &str| (a.to_string(), b.to_string());
+        assert_eq!(default_chain("", "", 52), s("cmif", "riv"));
+        assert_eq!(default_chain("", "", 100), s("cmif", "riv"));
+        assert_eq!(default_chain("", "", 400), s("subspace", "ml"));
+        assert_eq!(default_chain("cmif", "", 400), s("cmif", "ml"));
+        assert_eq!(default_chain("", "none", 2500), s("subspace", "none"));
+        assert_eq!(default_chain("sk", "riv", 4), s("sk", "riv"));
+    }
 }
