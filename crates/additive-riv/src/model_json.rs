@@ -135,6 +135,16 @@ pub struct Provenance {
     /// method's own details), in the order of `chain`.
     #[serde(default)]
     pub links: Vec<frf_data::LinkReport>,
+    /// For a model reduced by balanced truncation (`frfit reduce`): every Hankel singular
+    /// value of the stable part of the model it was reduced from, descending. Absent
+    /// otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hankel_singular_values: Option<Vec<f64>>,
+    /// For a reduced model: the a-priori bound `2 sum(discarded Hankel singular values)`
+    /// on the H-infinity norm of the difference to the model it was reduced from (of the
+    /// rational part; the known factors are the same). Absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_bound: Option<f64>,
 }
 
 /// The model file, schema version 1.

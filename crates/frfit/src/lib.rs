@@ -12,6 +12,7 @@ pub mod error;
 pub mod export;
 pub mod pipeline;
 pub mod plots;
+pub mod reduce;
 pub mod report;
 pub mod summary;
 pub mod validation_report;

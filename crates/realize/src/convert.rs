@@ -55,15 +55,15 @@ fn svd_failed(what: &str) -> RealizeError {
 }
 
 /// One dyad `sigma u v^H` of a truncated SVD.
-struct Dyad<T> {
-    sigma: f64,
-    u: Vec<T>,
-    v: Vec<T>,
+pub(crate) struct Dyad<T> {
+    pub(crate) sigma: f64,
+    pub(crate) u: Vec<T>,
+    pub(crate) v: Vec<T>,
 }
 
 /// The dyads of the SVD of a complex matrix whose singular values exceed
 /// `max(rank_tol, max(rows, cols) eps) * sigma_max`: `R ~ sum sigma u v^H`.
-fn truncated_svd_c(
+pub(crate) fn truncated_svd_c(
     r: &Mat<C64>,
     rank_tol: f64,
     what: &str,
@@ -91,7 +91,7 @@ fn truncated_svd_c(
 }
 
 /// Real counterpart of [`truncated_svd_c`]: `R ~ sum sigma u v^T`.
-fn truncated_svd_r(
+pub(crate) fn truncated_svd_r(
     r: &Mat<f64>,
     rank_tol: f64,
     what: &str,

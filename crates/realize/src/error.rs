@@ -58,4 +58,14 @@ pub enum RealizeError {
         /// Why.
         why: String,
     },
+    /// A pole that an operation needs in the open left half-plane is not there.
+    #[error("{what}: pole {pole} is not in the open left half-plane; {why}")]
+    Unstable {
+        /// Which term of the model (e.g. "pairs[3]").
+        what: String,
+        /// The pole, rad/s.
+        pole: crate::C64,
+        /// What the operation needs and why.
+        why: String,
+    },
 }

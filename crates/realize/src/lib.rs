@@ -16,7 +16,10 @@
 //!   [`KnownFactors`] (delay, derivative order, hold, input/output dynamics, crosstalk);
 //! - conversions between [`ModalModel`] and a real block-diagonal [`StateSpace`]
 //!   ([`convert`]: minimal realization by residue ranks, modal decomposition that
-//!   handles integrator chains exactly).
+//!   handles integrator chains exactly);
+//! - balanced truncation of the stable part with the rigid-body part split off and kept
+//!   exactly, Hankel singular values and the a-priori H-infinity error bound
+//!   ([`balanced`]).
 //!
 //! Threading: the frequency responses and [`expm::expm`] are sequential; the SVDs,
 //! eigendecompositions and matrix products of the conversions follow faer's global
@@ -29,6 +32,7 @@
 //! [`ResponseGrid`] stores one `ny x nu` complex matrix per frequency point, column-major
 //! (`vec(G)`), points one after another.
 
+pub mod balanced;
 pub mod convert;
 pub mod error;
 pub mod expm;
@@ -41,6 +45,7 @@ pub mod poly;
 pub mod state_space;
 pub mod zoh;
 
+pub use balanced::{balanced_truncation, BalancedReduction, BalancedTruncation, HankelAnalysis};
 pub use convert::DEFAULT_ZERO_TOL;
 pub use error::RealizeError;
 pub use factors::{DynamicsFactor, FactorTarget, Hold, KnownFactors};

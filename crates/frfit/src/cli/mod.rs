@@ -15,6 +15,7 @@ pub mod info;
 pub mod model_opts;
 pub mod nonparametric;
 pub mod output;
+pub mod reduce;
 pub mod simulate;
 pub mod validate;
 
@@ -56,6 +57,9 @@ pub enum Command {
     /// Minimum additive uncertainty per line against an independent validation FRF
     /// (Oomen-Bosgra); write DIR/validation.json and DIR/report.md.
     Validate(validate::Args),
+    /// Balanced truncation of a model (rigid body kept exactly): print the Hankel
+    /// singular values; with --order N write the reduced model and its error bound.
+    Reduce(reduce::Args),
 }
 
 /// Runs the parsed command line.
@@ -72,5 +76,6 @@ pub fn run(cli: Cli) -> Result<(), FrfitError> {
         Command::Export(a) => export::run(a, quiet),
         Command::Diagnose(a) => diagnose::run(a, quiet),
         Command::Validate(a) => validate::run(a, quiet),
+        Command::Reduce(a) => reduce::run(a, quiet),
     }
 }

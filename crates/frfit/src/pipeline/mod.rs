@@ -198,6 +198,7 @@ impl PipelineOutput {
             notes: self.fit.messages.clone(),
             chain: self.chain.clone(),
             links: self.links.clone(),
+            ..Default::default()
         };
         let band = self.summary.data.band_hz;
         let mut file = additive_riv::ModelFile::from_model(
