@@ -122,8 +122,15 @@ fn subspace_then_ml_finds_every_mode_at_the_noise_level() {
         fit_f.len(),
         last.convergence.describe()
     );
-    assert!(last.convergence.is_converged(), "{}", last.convergence.describe());
+    assert!(
+        last.convergence.is_converged(),
+        "{}",
+        last.convergence.describe()
+    );
     assert_eq!(n, 30, "modes found: {fit_f:?}");
     assert!(median < 1e-3, "median error {median:.3e}");
-    assert!(median < median0, "{median:.3e} vs the start's {median0:.3e}");
+    assert!(
+        median < median0,
+        "{median:.3e} vs the start's {median0:.3e}"
+    );
 }

@@ -383,9 +383,7 @@ pub(crate) fn eval_grid(
     let m = hf.ny * hf.nu;
     // about n^2 (nu + 1) flops per point: blocks only where the work is worth a thread
     let work_per_point = hf.n * hf.n * (hf.nu + 1);
-    let block = if m == 0 {
-        pts.len().max(1)
-    } else if work_per_point * pts.len() < PARALLEL_WORK {
+    let block = if m == 0 || work_per_point * pts.len() < PARALLEL_WORK {
         pts.len().max(1)
     } else {
         PARALLEL_POINTS
