@@ -62,6 +62,9 @@ fn motor_bench_floor_exceeds_declared_variance() {
     for (order, _, ratio, exceeds) in r {
         // about 22 times the variance (4.7 in amplitude) whatever the order: jitter, not
         // curvature
-        assert!(exceeds && (15.0..30.0).contains(&ratio), "order {order}: {ratio}");
+        assert!(
+            exceeds && (15.0..30.0).contains(&ratio),
+            "order {order}: {ratio}"
+        );
     }
 }
