@@ -26,7 +26,7 @@
 //! the 4 x 13 wafer-stage report takes a fraction of a second.
 
 use crate::plots::{cmif_plot, Axis, LinePlot, Marker, Series, SharedGrid, PALETTE};
-use crate::summary::{ErrorStats, StepSummary, Summary};
+use crate::summary::{DistortionSummary, ErrorStats, StepSummary, Summary};
 use crate::FrfitError;
 use frf_data::cmif::{Cmif, CmifPeak};
 use frf_data::{Frf, FrfDataset, FrfError};
@@ -964,9 +964,65 @@ fn cell(s: &str) -> String {
 fn verdict_text(v: &str) -> String {
     match v {
         "noise_limited" => "noise-limited".into(),
+        "nonlinear_distortion" => "nonlinear distortion".into(),
         "unexplained_residual" => "unexplained residual".into(),
         other => other.replace('_', " "),
     }
+}
+
+/// The line-to-line floor against the measured variance, and the final residual
+/// against both: the evidence for (or against) nonlinear distortion.
+fn distortion_section(md: &mut String, d: &DistortionSummary) {
+    let _ = writeln!(md, "## Line-to-line floor (nonlinear distortion)\n");
+    let _ = writeln!(md, "| level | relative to the measured variance |");
+    let _ = writeln!(md, "|---|---:|");
+    let _ = writeln!(
+        md,
+        "| measured variance (median sqrt(var) / \\|G\\| {}) | 1 |",
+        fmt_num(d.variance_median_rel)
+    );
+    let _ = writeln!(
+        md,
+        "| line-to-line floor, order-{} differences (median relative level {}) | {} (lower bound {}) |",
+        d.order,
+        fmt_num(d.floor_median_rel),
+        fmt_num(d.floor_to_variance),
+        fmt_num(d.floor_to_variance_lower)
+    );
+    let _ = writeln!(
+        md,
+        "| final residual | {} ({} of the floor) |\n",
+        fmt_num(d.residual_to_variance),
+        fmt_num(d.residual_to_floor)
+    );
+    let _ = writeln!(
+        md,
+        "Ratios of variances: medians over lines and entries of the per-line ratio, over \
+         ln 2 (1 when the measured variance explains the scatter). The floor is \
+         model-free: differences across adjacent lines cancel the smooth response and keep \
+         the jitter, which is independent from line to line for noise and for the \
+         stochastic nonlinear distortions of a random-phase multisine alike. {}\n",
+        if d.exceeds {
+            format!(
+                "It exceeds the measured variance (threshold {}): the variance misses part \
+                 of the scatter, as one estimated over the periods of one realization \
+                 misses the distortion. The diagnosis judged residuals against the \
+                 local floor{}.",
+                fmt_num(d.min_ratio),
+                if d.loop_against_floor {
+                    ""
+                } else {
+                    " (not here)"
+                }
+            )
+        } else {
+            format!(
+                "It does not exceed the measured variance significantly (threshold {}): \
+                 no sign of distortion that the variance misses.",
+                fmt_num(d.min_ratio)
+            )
+        }
+    );
 }
 
 fn errors_row(name: &str, e: &ErrorStats) -> String {
@@ -1082,6 +1138,9 @@ fn markdown(
         "Relative error: |G - P| / |G| over all lines and entries. Residual / noise: \
          sqrt(mean |G - P|^2 / var), 1 at the noise level.\n"
     );
+    if let Some(d) = &s.distortion {
+        distortion_section(&mut md, d);
+    }
 
     // Figures.
     let _ = writeln!(md, "## Figures\n");

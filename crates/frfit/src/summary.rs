@@ -11,7 +11,11 @@
 //!               errors: {median_rel, p95_rel, residual_to_noise}},
 //!   "steps": [{effect, accepted, evidence, params, uncertainty, f_statistic, f_critical,
 //!              added_params, before: {..errors}, after: {..errors}, figure}],
-//!   "verdict": "noise_limited" | "unexplained_residual", "verdict_evidence": "...",
+//!   "verdict": "noise_limited" | "nonlinear_distortion" | "unexplained_residual",
+//!   "verdict_evidence": "...",
+//!   "distortion": {order, floor_to_variance, floor_to_variance_lower, min_ratio, exceeds,
+//!                  variance_median_rel, floor_median_rel, residual_to_variance,
+//!                  residual_to_floor, loop_against_floor},
 //!   "final_model": {modes: [{f_hz, zeta}], order, delay_s, hold, rigid_body_integrators,
 //!                   feedthrough, dynamics: [..], iterations, convergence},
 //!   "final": {median_rel, p95_rel, residual_to_noise},
@@ -177,7 +181,7 @@ pub struct Summary {
     pub initial: InitialSummary,
     /// The diagnosis steps, in order.
     pub steps: Vec<StepSummary>,
-    /// `noise_limited` or `unexplained_residual`.
+    /// `noise_limited`, `nonlinear_distortion` or `unexplained_residual`.
     pub verdict: String,
     /// The evidence for the verdict.
     pub verdict_evidence: String,
@@ -205,6 +209,44 @@ pub struct Summary {
     /// them (`--refine ml` in `frfit fit`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<UncertaintySummary>,
+    /// The data's model-free line-to-line floor against the measured variance and the
+    /// final residual against both (present when the data carry a measured variance).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<DistortionSummary>,
+}
+
+/// The evidence for or against nonlinear distortion: the data's line-to-line floor
+/// (`validation::distortion`, model-free) against their measured variance, and the final
+/// residual against both. All ratios are of variances (energies), robust (medians over
+/// lines and entries of the per-line ratios, divided by `ln 2`): 1 when the measured
+/// variance explains the scatter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DistortionSummary {
+    /// Order of the differences across adjacent lines.
+    pub order: usize,
+    /// The line-to-line floor over the measured variance.
+    pub floor_to_variance: f64,
+    /// Its lower confidence bound.
+    pub floor_to_variance_lower: f64,
+    /// The floor significantly exceeds the variance at `floor_to_variance >= min_ratio`
+    /// (and a lower bound above 1).
+    pub min_ratio: f64,
+    /// Whether it does.
+    pub exceeds: bool,
+    /// Median over lines and entries of `sqrt(var) / |G|`.
+    pub variance_median_rel: f64,
+    /// The floor as a relative level: `sqrt(floor_to_variance)` times the above.
+    pub floor_median_rel: f64,
+    /// The final residual over the measured variance (median of `|G - P|^2 / var` over
+    /// `ln 2`).
+    pub residual_to_variance: f64,
+    /// The final residual over the local floor (the measured variance raised to the
+    /// model-free estimate of `validation::noise::estimate_noise` where that is higher):
+    /// median of `|G - P|^2 / floor` over `ln 2`.
+    pub residual_to_floor: f64,
+    /// Whether the diagnosis loop judged residuals against the local floor (it does
+    /// when the floor exceeds the variance).
+    pub loop_against_floor: bool,
 }
 
 /// A mode with the standard deviations of its frequency and damping.

@@ -32,6 +32,7 @@ fn three_realizations() -> Frf {
         },
         input_noise_rms: 0.0,
         cubic_nonlinearity: 0.0,
+        stochastic_distortion: 0.0,
         delay_samples: stage.delay_samples,
         excited_inputs: None,
         seed: 3,

@@ -191,6 +191,7 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
         chain: vec!["cmif".into(), "riv".into()],
         chain_runs: Vec::new(),
         uncertainty: None,
+        distortion: None,
     }
 }
 

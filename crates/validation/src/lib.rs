@@ -43,6 +43,7 @@
 //! ```
 
 pub(crate) mod cmat;
+pub mod distortion;
 pub mod disturbance;
 pub mod error;
 pub mod frf_validation;
@@ -55,6 +56,7 @@ mod serde_f64;
 pub mod signatures;
 pub mod stats;
 
+pub use distortion::{floor_noise, line_floor, residual_ratio, LineFloor, LineFloorConfig};
 pub use disturbance::{chi2_2_quantile, Coverage, DisturbanceModel};
 pub use error::ValidationError;
 pub use frf_validation::{

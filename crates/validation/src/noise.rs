@@ -389,7 +389,7 @@ const TRIM_AT: f64 = 4.6;
 /// `x` (`c_l = 1 / prod_(m != l) (x_l - x_m)`, which annihilates every polynomial of
 /// degree below the order), normalised to `sum c_l^2 = 1`. False when two abscissae
 /// coincide.
-fn difference_coefficients(x: &[f64], c: &mut [f64]) -> bool {
+pub(crate) fn difference_coefficients(x: &[f64], c: &mut [f64]) -> bool {
     let q = x.len();
     // Normalised abscissae for conditioning.
     let x0 = x[0];

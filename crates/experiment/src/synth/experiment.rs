@@ -38,6 +38,8 @@ use crate::nonparametric::{
 };
 use faer::Mat;
 use frf_data::{Frf, FrfError, C64};
+use rand::Rng;
+use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
 /// Which simulation path to run (see the module documentation).
@@ -69,6 +71,17 @@ pub struct ExperimentConfig {
     pub input_noise_rms: f64,
     /// Coefficient `alpha` of the actuator nonlinearity `a + alpha a^3` (0: linear).
     pub cubic_nonlinearity: f64,
+    /// Relative level `d` of a stochastic nonlinear contribution (0: none; frequency-domain
+    /// path only). In realization `r` the plant behaves at the excited lines as
+    /// `P + G_S,r`, the best linear approximation plus the stochastic nonlinear
+    /// distortions of Pintelon and Schoukens (*System Identification: A Frequency Domain
+    /// Approach*, 2nd ed. 2012, sec. 3.4): every entry and line of `G_S,r` is circular
+    /// complex Gaussian with standard deviation `d |P_ij(w_k)|`, independent across lines
+    /// and entries, new in each realization and the same in all its periods (and in all
+    /// its experiments, so that `Y U^-1` of the realization is `P + G_S,r` up to the
+    /// noise). The noise variance from the periods of one realization does not see it;
+    /// the variance over realizations does.
+    pub stochastic_distortion: f64,
     /// Computation delay in samples between the recorded input and the hold (1).
     pub delay_samples: f64,
     /// The input excited by each experiment; `None`: experiment `e` excites input `e`.
@@ -93,6 +106,7 @@ impl ExperimentConfig {
             output_noise: NoiseConfig::default(),
             input_noise_rms: 0.0,
             cubic_nonlinearity: 0.0,
+            stochastic_distortion: 0.0,
             delay_samples: 1.0,
             excited_inputs: None,
             seed,
@@ -131,6 +145,13 @@ impl ExperimentConfig {
                 "cubic_nonlinearity",
                 self.cubic_nonlinearity,
                 "must be finite",
+            ));
+        }
+        if !(self.stochastic_distortion.is_finite() && self.stochastic_distortion >= 0.0) {
+            return Err(FrfError::invalid(
+                "stochastic_distortion",
+                self.stochastic_distortion,
+                "must be finite and >= 0",
             ));
         }
         if !(self.delay_samples.is_finite() && self.delay_samples >= 0.0) {
@@ -477,6 +498,47 @@ impl ClosedLoopExperiment {
         }
     }
 
+    /// The stochastic nonlinear contribution of realization `r` (see
+    /// [`ExperimentConfig::stochastic_distortion`]), `ny x nu` column-major per line: the
+    /// same for every experiment and period of the realization. `None` when it is off.
+    fn distortion_lines(&self, r: usize) -> Option<Vec<C64>> {
+        let d = self.config.stochastic_distortion;
+        if d == 0.0 {
+            return None;
+        }
+        let mut rng = stream_rng(self.config.seed, Stream::Distortion, 0, r);
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        Some(
+            self.p_lines
+                .iter()
+                .map(|p| {
+                    let re: f64 = rng.sample(StandardNormal);
+                    let im: f64 = rng.sample(StandardNormal);
+                    C64::new(re, im) * (d * s * p.norm())
+                })
+                .collect(),
+        )
+    }
+
+    /// `yss + G_S,r uss` per line (the steady-state output of realization `r` with its
+    /// stochastic nonlinear contribution), or `yss` when it is off.
+    fn add_stochastic_distortion(&self, r: usize, uss: &[C64], mut yss: Vec<C64>) -> Vec<C64> {
+        let Some(gs) = self.distortion_lines(r) else {
+            return yss;
+        };
+        let (ny, nu) = (self.plant.ny(), self.plant.nu());
+        for k in 0..self.freq_hz.len() {
+            let g = &gs[k * ny * nu..(k + 1) * ny * nu];
+            for j in 0..nu {
+                let u = uss[k * nu + j];
+                for i in 0..ny {
+                    yss[k * ny + i] += g[j * ny + i] * u;
+                }
+            }
+        }
+        yss
+    }
+
     /// Path (a) for experiment `e`, realization `r`.
     fn experiment_frequency_domain(
         &self,
@@ -520,6 +582,7 @@ impl ClosedLoopExperiment {
             }
             Some(ab) => self.harmonic_balance(ab, a, &rk)?,
         };
+        let yss = self.add_stochastic_distortion(r, &uss, yss);
         let (v, nurec) = self.noise_records(e, r);
         let mut input = vec![C64::new(0.0, 0.0); np * nl * nu];
         let mut output = vec![C64::new(0.0, 0.0); np * nl * ny];
@@ -729,6 +792,13 @@ impl ClosedLoopExperiment {
         let (ny, nu) = (self.plant.ny(), self.plant.nu());
         let cfg = &self.config;
         let (np, nl, n) = (cfg.periods, self.freq_hz.len(), cfg.grid.period());
+        if cfg.stochastic_distortion != 0.0 {
+            return Err(FrfError::invalid(
+                "stochastic_distortion",
+                cfg.stochastic_distortion,
+                "is simulated on the frequency-domain path only",
+            ));
+        }
         let d = cfg.delay_samples;
         if d.fract() != 0.0 {
             return Err(FrfError::invalid(

@@ -20,6 +20,7 @@ pub(crate) enum Stream {
     Phases = 1,
     OutputNoise = 2,
     InputNoise = 3,
+    Distortion = 4,
 }
 
 /// The generator of stream `what` for experiment `e` and realization `r`.

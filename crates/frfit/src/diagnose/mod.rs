@@ -10,7 +10,13 @@
 //! parameters says it explains more than noise (module `accept`), then prunes the modes the
 //! new structure made redundant. The loop stops when the residual is at the noise level
 //! or when no candidate helps; a final refinement converges the last structure, guarded
-//! against instability and against ending worse than the first fit. Every tested
+//! against instability and against ending worse than the first fit. When the data's
+//! line-to-line floor significantly exceeds their measured variance (nonlinear
+//! distortion that the variance, from the periods of one realization, misses), every
+//! residual of the loop is judged against the variance raised to the local floor
+//! ([`FitContext::judging_noise`]): the loop then stops once the residual is at the
+//! floor instead of chasing the distortion with effects that each explain a little of
+//! it. Every tested
 //! candidate is recorded as a step of the summary, with its parameters as fitted
 //! ([`FittedEffect`]).
 
@@ -88,7 +94,7 @@ pub fn diagnose(
     let analysis = analyze_residual(
         &ctx.band,
         first_response,
-        &ctx.noise,
+        ctx.judging_noise(),
         &ctx.residual_config(&fit.model),
     )
     .map_err(err("residual analysis"))?;
@@ -141,7 +147,7 @@ pub fn diagnose(
         st.analysis = analyze_residual(
             &ctx.band,
             &st.response,
-            &ctx.noise,
+            ctx.judging_noise(),
             &ctx.residual_config(&st.model),
         )
         .map_err(err("residual analysis"))?;

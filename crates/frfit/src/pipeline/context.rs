@@ -13,8 +13,16 @@ use frf_data::cmif::{cmif, Cmif};
 use frf_data::delay::{estimate_delay, DelayEstimate};
 use frf_data::{Frf, FrfDataset, ProgressSink, Weighting};
 use std::time::Instant;
-use validation::noise::{noise_level, NoiseLevel};
+use validation::distortion::{floor_noise, line_floor, LineFloor, LineFloorConfig};
+use validation::noise::{noise_level, NoiseLevel, NoiseSource};
 use validation::residual::ResidualConfig;
+
+/// Half-width, in lines, of the window of the local line-to-line floor
+/// ([`validation::distortion::floor_noise`]): 40, as the noise estimate of
+/// `validation::noise` (81 lines hold about 16 independent order-4 stencils, enough for a
+/// median within +-30 %, while a floor that changes over a few tens of lines is
+/// followed).
+pub const FLOOR_HALF_WINDOW: usize = 40;
 
 /// Everything a run works from, computed once by [`FitContext::new`] and shared by the
 /// first fit, the diagnosis loop and the summary.
@@ -35,6 +43,16 @@ pub struct FitContext {
     pub delay: DelayChoice,
     /// The noise level of the band.
     pub noise: NoiseLevel,
+    /// The model-free line-to-line floor of the band against its measured variance
+    /// ([`validation::distortion`]); `None` when the variance was not measured (an
+    /// estimated noise level is this floor already) or the floor cannot be formed.
+    pub line_floor: Option<LineFloor>,
+    /// The measured variance raised to the local line-to-line floor
+    /// ([`validation::distortion::floor_noise`]) when the floor significantly exceeds
+    /// the measured variance (nonlinear distortion that the variance misses); `None`
+    /// otherwise. The diagnosis loop judges the residual against it, see
+    /// [`judging_noise`](Self::judging_noise).
+    pub distortion_noise: Option<NoiseLevel>,
     /// CMIF of the band.
     pub cmif: Cmif,
     /// The weighting, resolved for the band.
@@ -84,6 +102,31 @@ impl FitContext {
         let decl: Declared = declared(data);
         let fs_hz = cfg.fs_hz.or(decl.fs_hz);
         let noise = noise_level(&band).map_err(err("noise level"))?;
+        let line_floor = matches!(noise.source, NoiseSource::Measured)
+            .then(|| line_floor(&band, &noise, &LineFloorConfig::default()).ok())
+            .flatten();
+        let distortion_noise = match &line_floor {
+            Some(f) if f.exceeds => Some(
+                floor_noise(
+                    &band,
+                    &noise,
+                    &LineFloorConfig::default(),
+                    FLOOR_HALF_WINDOW,
+                )
+                .map_err(err("noise level"))?,
+            ),
+            _ => None,
+        };
+        // with distortion that the variance misses, the fits are weighted by the scatter
+        // the data show (the local floor): inverse-variance weights from a variance that
+        // misses it by factors that change along the band would pull the model towards
+        // the lines where it misses the most
+        let band = match &distortion_noise {
+            Some(dn) if band.has_variance() => band
+                .with_variance(Some(dn.variance.clone()))
+                .map_err(err("noise level"))?,
+            _ => band,
+        };
         let weighting = cfg.weighting.resolve(&band);
         let fit_data = FitData::new(&band, &weighting).map_err(err("fit"))?;
         let omega = band.omegas();
@@ -140,6 +183,8 @@ impl FitContext {
             hold,
             delay,
             noise,
+            line_floor,
+            distortion_noise,
             cmif,
             weighting,
             fit_data,
@@ -147,6 +192,18 @@ impl FitContext {
             omega,
             variance_dof,
         })
+    }
+
+    /// The noise level the diagnosis loop judges residuals against: the measured (or
+    /// estimated) one, or, when the line-to-line floor significantly exceeds the measured
+    /// variance, that variance raised to the local floor. A variance from the periods of one
+    /// realization misses the stochastic nonlinear distortions; judged against it, the
+    /// distortion would look like a residual that every effect of the catalogue
+    /// "explains" a little, and the loop would chase it. Judged against the floor, an
+    /// effect is still found where the residual stands above the data's own jitter.
+    /// The weights of the fit stay those of the measured variance.
+    pub fn judging_noise(&self) -> &NoiseLevel {
+        self.distortion_noise.as_ref().unwrap_or(&self.noise)
     }
 
     /// The data's total delay (hold + computation + transport), seconds, when estimated.

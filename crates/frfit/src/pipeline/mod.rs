@@ -11,7 +11,10 @@
 //! structure, refits, and keeps it only when an F test that accounts for the added
 //! parameters says it explains more than noise. It stops when the residual is at the
 //! noise level (`noise_limited`) or when no candidate helps (`unexplained_residual`),
-//! and records every step for the report.
+//! and records every step for the report. When the residual is above the measured
+//! variance but at the data's model-free line-to-line floor, and that floor
+//! significantly exceeds the variance, the verdict is `nonlinear_distortion`
+//! (`validation::distortion`).
 
 mod context;
 mod first_fit;
@@ -301,6 +304,22 @@ pub fn run(
         &ctx.residual_config(&fit.model),
     )
     .map_err(err("residual analysis"))?;
+    // the residual against the variance raised to the local line-to-line floor, when the floor
+    // exceeds the variance and the residual is above the variance (the verdict
+    // `nonlinear_distortion` needs it)
+    let floor_analysis = match &ctx.distortion_noise {
+        Some(n) if analysis.significant => Some(
+            analyze_residual(
+                &ctx.band,
+                &final_response,
+                n,
+                &ctx.residual_config(&fit.model),
+            )
+            .map_err(err("residual analysis"))?,
+        ),
+        _ => None,
+    };
+    let distortion = summarize::distortion_summary(&ctx, &final_response);
     let final_errors = error_stats(&ctx.band, &final_response, &ctx.noise);
     timings.stage("total", t0);
     let summary = build_summary(
@@ -315,6 +334,8 @@ pub fn run(
             steps,
             fit: &fit,
             analysis: &analysis,
+            floor_analysis: floor_analysis.as_ref(),
+            distortion,
             final_errors,
             timings: timings.0,
             chain: first.chain.clone(),
