@@ -413,55 +413,6 @@ impl MlRefine {
             });
         }
         let theta = nonlinear_start(&model, &lay);
-        if measured && cfg.prune_real_poles && !model.modal.real_poles.is_empty() {
-            // a start real pole that explains less than `min_f` times the noise per
-            // parameter (the residues of every entry and the pole) is dropped before the
-            // iterations: an initialiser at a high order fits noise with real poles,
-            // which the iterations then push unstable or off to infinity
-            let prob0 = Problem::new(
-                lay.clone(),
-                data.omegas(),
-                data.values_vec(),
-                sw.clone(),
-                model.clone(),
-            );
-            if let Ok(ev0) = prob0.evaluate(&theta) {
-                let mut weakest: Option<(usize, f64)> = None;
-                for r in 0..model.modal.real_poles.len() {
-                    let mut m2 = model.clone();
-                    m2.modal.real_poles.remove(r);
-                    let lay2 = Layout {
-                        n_real: lay.n_real - 1,
-                        ..lay.clone()
-                    };
-                    let p2 = Problem::new(
-                        lay2.clone(),
-                        data.omegas(),
-                        data.values_vec(),
-                        sw.clone(),
-                        m2.clone(),
-                    );
-                    if let Ok(ev2) = p2.evaluate(&nonlinear_start(&m2, &lay2)) {
-                        let f = (ev2.cost - ev0.cost) / (lay.m() + 1) as f64;
-                        if weakest.is_none_or(|(_, fw)| f < fw) {
-                            weakest = Some((r, f));
-                        }
-                    }
-                }
-                if let Some((r, f)) = weakest.filter(|(_, f)| *f < cfg.min_f) {
-                    let pole = model.modal.real_poles[r].pole;
-                    let mut m2 = model.clone();
-                    m2.modal.real_poles.remove(r);
-                    if m2.modal.pairs.len() + m2.modal.real_poles.len() + m2.modal.rigid.len() > 0 {
-                        messages.push(format!(
-                            "start real pole at {pole:.3e} rad/s explains {f:.2} times the noise per parameter (< {}): dropped before the iterations",
-                            cfg.min_f
-                        ));
-                        return self.estimate_from(data, m2, drops, messages);
-                    }
-                }
-            }
-        }
         let prob = Problem::new(
             lay.clone(),
             data.omegas(),
@@ -480,6 +431,46 @@ impl MlRefine {
             condition: if s.ratio > 0.0 { 1.0 / s.ratio } else { f64::INFINITY },
             hint: "drop one of two coinciding poles, or a rigid-body or feedthrough term the band does not show".into(),
         })?;
+        if measured && cfg.prune_real_poles && !model.modal.real_poles.is_empty() {
+            // a start real pole that explains less than `min_f` times the noise per
+            // parameter (the residues of every entry and the pole) is dropped before the
+            // iterations: an initialiser at a high order fits noise with real poles,
+            // which the iterations then push unstable or off to infinity
+            let mut weakest: Option<(usize, f64)> = None;
+            for r in 0..model.modal.real_poles.len() {
+                let mut m2 = model.clone();
+                m2.modal.real_poles.remove(r);
+                let lay2 = Layout {
+                    n_real: lay.n_real - 1,
+                    ..lay.clone()
+                };
+                let p2 = Problem::new(
+                    lay2.clone(),
+                    prob.omega.clone(),
+                    prob.g.clone(),
+                    prob.sw.clone(),
+                    m2.clone(),
+                );
+                if let Ok(ev2) = p2.evaluate(&nonlinear_start(&m2, &lay2)) {
+                    let f = (ev2.cost - eval0.cost) / (lay.m() + 1) as f64;
+                    if weakest.is_none_or(|(_, fw)| f < fw) {
+                        weakest = Some((r, f));
+                    }
+                }
+            }
+            if let Some((r, f)) = weakest.filter(|(_, f)| *f < cfg.min_f) {
+                let pole = model.modal.real_poles[r].pole;
+                let mut m2 = model.clone();
+                m2.modal.real_poles.remove(r);
+                if m2.modal.pairs.len() + m2.modal.real_poles.len() + m2.modal.rigid.len() > 0 {
+                    messages.push(format!(
+                            "start real pole at {pole:.3e} rad/s explains {f:.2} times the noise per parameter (< {}): dropped before the iterations",
+                            cfg.min_f
+                        ));
+                    return self.estimate_from(data, m2, drops, messages);
+                }
+            }
+        }
         let valid = |np: usize| {
             move |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0)
         };
