@@ -282,6 +282,28 @@ pub fn residue_basis(
     Ok(basis)
 }
 
+/// Scales every column of `a` to unit norm (a zero column stays) and returns the
+/// scales: the least-squares solution of the scaled regressor divided by them is that of
+/// `a`.
+pub(crate) fn scale_columns(a: &mut Mat<f64>) -> Vec<f64> {
+    let scale: Vec<f64> = (0..a.ncols())
+        .map(|q| {
+            let s = a.col(q).norm_l2();
+            if s > 0.0 {
+                s
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    for (q, &s) in scale.iter().enumerate() {
+        for r in 0..a.nrows() {
+            a[(r, q)] /= s;
+        }
+    }
+    scale
+}
+
 /// Fits the residues, rigid-body coefficients and feedthrough of the poles `ps` to the
 /// data `g` (line after line, each `vec(G)`) at `omega` with weights `w` (same layout),
 /// through the currency's response with `factors`. Returns the model and the worst
@@ -344,21 +366,7 @@ pub fn fit_residues(
                     y[(2 * k + 1, c)] = g[k * m + e].im * sw;
                 }
             }
-            let scale: Vec<f64> = (0..nb)
-                .map(|q| {
-                    let s = a.col(q).norm_l2();
-                    if s > 0.0 {
-                        s
-                    } else {
-                        1.0
-                    }
-                })
-                .collect();
-            for (q, &s) in scale.iter().enumerate() {
-                for r in 0..2 * nl {
-                    a[(r, q)] /= s;
-                }
-            }
+            let scale = scale_columns(&mut a);
             let qr = a.qr();
             let cond = condition(&qr.thin_R().to_owned());
             let mut x = qr.solve_lstsq(&y);

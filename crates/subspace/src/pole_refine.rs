@@ -22,7 +22,7 @@
 //! Steps that do not lower the cost are halved; a step that would move a pole into
 //! the right half-plane (or a pair onto the real axis) is halved too.
 
-use crate::currency::{residue_basis, PoleSet};
+use crate::currency::{residue_basis, scale_columns, PoleSet};
 use crate::SubspaceError;
 use faer::linalg::solvers::SolveLstsq;
 use faer::Mat;
@@ -115,21 +115,7 @@ impl Entries<'_> {
         let mut cost = 0.0;
         for e in 0..self.m() {
             let (mut a, y) = self.weighted(&basis, e);
-            let scale: Vec<f64> = (0..nb)
-                .map(|q| {
-                    let s = a.col(q).norm_l2();
-                    if s > 0.0 {
-                        s
-                    } else {
-                        1.0
-                    }
-                })
-                .collect();
-            for (q, &s) in scale.iter().enumerate() {
-                for r in 0..a.nrows() {
-                    a[(r, q)] /= s;
-                }
-            }
+            let scale = scale_columns(&mut a);
             let qr = a.qr();
             let xs = qr.solve_lstsq(&y);
             let x: Vec<f64> = (0..nb).map(|q| xs[(q, 0)] / scale[q]).collect();
