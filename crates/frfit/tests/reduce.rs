@@ -13,7 +13,7 @@ use frf_data::truth::Truth;
 use frfit::additive_riv::{AdditiveModel, Domain, ModelFile, Provenance};
 use frfit::reduce::additive_from_modal;
 use realize::balanced::{hinf_grid, max_sv_difference};
-use realize::{balanced_truncation, BalancedTruncation, ModalModel, PolePair};
+use realize::{balanced_truncation, BalancedTruncation, ModalModel};
 use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
 
@@ -125,23 +125,10 @@ fn run_ok(args: &[&str]) -> String {
     stdout(&o)
 }
 
-/// The 2 x 3 plant of the CLI tests (double integrator of rank 2 and three modes).
-fn plant() -> ModalModel {
+/// The 2 x 3 plant of the CLI tests ([`common::plant`]) with a feedthrough.
+fn plant_with_feedthrough() -> ModalModel {
+    let mut m = common::plant();
     let (ny, nu) = (2, 3);
-    let mut m = ModalModel::new(ny, nu);
-    m.rigid = vec![
-        Mat::zeros(ny, nu),
-        Mat::from_fn(ny, nu, |i, j| 0.5 + 0.1 * (i + 2 * j) as f64),
-    ];
-    let shapes = [
-        ([1.0, 0.4], [1.0, -0.5, 0.3]),
-        ([0.3, -1.0], [0.2, 1.0, 0.8]),
-        ([1.0, 1.0], [-0.7, 0.4, 1.0]),
-    ];
-    for (f, (c, b)) in MODES_HZ.iter().zip(shapes) {
-        let num = Mat::from_fn(ny, nu, |i, j| c[i] * b[j] * (TAU * f).powi(2) * 2.0);
-        m.pairs.push(PolePair::from_second_order(*f, 0.01, &num));
-    }
     m.feedthrough = Mat::from_fn(ny, nu, |i, j| 1e-3 * (i as f64 - j as f64));
     m
 }
@@ -196,7 +183,7 @@ fn check_cli_reduction(m: &ModalModel, model: &Path, dir: &Path, orders: &[usize
 #[test]
 fn cli_reduce_writes_the_bound_and_keeps_the_integrators() {
     let dir = temp_dir("reduce-cli");
-    let m = plant();
+    let m = plant_with_feedthrough();
     for (domain, name, rigid_tol) in [
         (Domain::Continuous, "m.json", 0.0),
         (Domain::ZohDiscrete { ts: 1e-3 }, "mz.json", 1e-13),
@@ -215,7 +202,7 @@ fn cli_reduce_writes_the_bound_and_keeps_the_integrators() {
 fn cli_reduce_refuses_bad_orders_and_files() {
     let dir = temp_dir("reduce-bad");
     let path = dir.join("m.json");
-    model_file(&plant(), Domain::Continuous, &path);
+    model_file(&plant_with_feedthrough(), Domain::Continuous, &path);
     let out = dir.join("r.json");
     for (order, says) in [("11", "at most 10"), ("3", "at least 4"), ("0", "at least")] {
         let o = run(&[

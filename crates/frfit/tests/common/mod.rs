@@ -44,10 +44,9 @@ pub fn temp_dir(test: &str) -> PathBuf {
     d
 }
 
-/// Writes a 2 x 3 plant (free body + modes at 35, 80 and 150 Hz, damping 0.01),
-/// 5..200 Hz in 0.25 Hz lines, delayed by `delay_s`, with a variance of
-/// `(1e-3 |G|)^2` attached (the values themselves are exact), to `dir/plant.csv`.
-pub fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
+/// The 2 x 3 plant of the CLI tests: a double integrator of rank 2 and modes at
+/// [`MODES_HZ`] (damping 0.01, rank-one residues), no feedthrough.
+pub fn plant() -> ModalModel {
     let (ny, nu) = (2, 3);
     let mut m = ModalModel::new(ny, nu);
     m.rigid = vec![
@@ -63,6 +62,15 @@ pub fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
         let num = Mat::from_fn(ny, nu, |i, j| c[i] * b[j] * (TAU * f).powi(2) * 2.0);
         m.pairs.push(PolePair::from_second_order(*f, 0.01, &num));
     }
+    m
+}
+
+/// Writes a 2 x 3 plant (free body + modes at 35, 80 and 150 Hz, damping 0.01),
+/// 5..200 Hz in 0.25 Hz lines, delayed by `delay_s`, with a variance of
+/// `(1e-3 |G|)^2` attached (the values themselves are exact), to `dir/plant.csv`.
+pub fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
+    let m = plant();
+    let (ny, nu) = (m.ny, m.nu);
     let f: Vec<f64> = (0..781).map(|k| 5.0 + 0.25 * k as f64).collect();
     let w: Vec<f64> = f.iter().map(|x| TAU * x).collect();
     let g = m.freq_response(&w).unwrap();
