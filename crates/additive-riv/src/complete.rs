@@ -28,9 +28,14 @@
 //!    (at least [`CompleteConfig::min_f`], and a drop of at least
 //!    [`CompleteConfig::min_cost_drop`]); a mode narrower than the line spacing must
 //!    pass the same test on the lines off its own resonance (one outlying line is fitted
-//!    by such a mode as well as by any). This repeats a bounded number of times; the
-//!    rigid body is chosen again after every kept mode.
+//!    by such a mode as well as by any). When no residual peak gives a mode that
+//!    passes, the trial poles of a matched single-mode scan of the weighted residual
+//!    ([`crate::mode_scan`]) are tried under the same tests: a mode between two fitted
+//!    ones that their settled poles widened to cover leaves no peak of its own. This
+//!    repeats a bounded number of times; the rigid body is chosen again after every
+//!    kept mode.
 
+use crate::mode_scan::{scan_residual, ScanConfig};
 use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
 use crate::riv::{iterate, RivConfig};
 use crate::significance::{f_critical, f_statistic, noise_scale, submodel_cost_increase};
@@ -90,6 +95,15 @@ pub struct CompleteConfig {
     /// candidates; the cost test of each trial decides. With inverse-variance weights
     /// the residual's unit variance still corrects the prominences.
     pub peaks: PeakConfig,
+    /// Trials from the matched single-mode scan of the residual ([`crate::mode_scan`])
+    /// per round, tried when none of the residual's peaks gives a mode that passes.
+    /// Default: 3. 0 turns the scan off.
+    pub scan_trials: usize,
+    /// The scan's grid. Default: [`ScanConfig::default`].
+    pub scan: ScanConfig,
+    /// When no single candidate (residual peak or scan trial) passes, the pairs of the
+    /// first three are tried, two modes at once. Default: true.
+    pub pair_trials: bool,
 }
 
 impl Default for CompleteConfig {
@@ -112,6 +126,9 @@ impl Default for CompleteConfig {
                 estimate_noise: false,
                 ..PeakConfig::default()
             },
+            scan_trials: 3,
+            scan: ScanConfig::default(),
+            pair_trials: true,
         }
     }
 }
@@ -300,7 +317,9 @@ fn mode_list(model: &AdditiveModel) -> Vec<(f64, f64)> {
 
 /// Removes the modes of `model` whose numerators are not significant (F statistic of
 /// the Wald cost increase below the F test at `alpha` and below `min_f`), the weakest
-/// first and one at a time, settling the poles after each removal. A mode whose cost
+/// first and one at a time, settling the poles after each removal; a removal that
+/// raises the cost by more than [`CompleteConfig::min_cost_drop`] is not made (and
+/// the pruning ends there). A mode whose cost
 /// increase is below the rounding floor ([`CompleteConfig::rounding_floor`], squared, of
 /// the weighted data's energy) counts as insignificant. A mode added where
 /// the residual was largest may become redundant once the others are in place (two
@@ -357,7 +376,14 @@ fn prune_insignificant(
         if fit_numerators(&mut trial, data).is_err() {
             break;
         }
-        cur = settle(trial.clone(), data, coarse, its).unwrap_or(trial);
+        let trial = settle(trial.clone(), data, coarse, its).unwrap_or(trial);
+        // the noise scale of the test is estimated from the residual, which a misfit
+        // elsewhere (a mode still missing) inflates: a mode whose removal raises the
+        // cost by more than `min_cost_drop` explains plainly what it fits and stays
+        if model_cost(&trial, data, None) > (1.0 + cfg.min_cost_drop) * v {
+            break;
+        }
+        cur = trial;
         if let Some(k) = report.added.iter().position(|a| (a - f).abs() <= 0.05 * f) {
             report.added.remove(k);
         }
@@ -532,6 +558,36 @@ fn view_candidates(
     out
 }
 
+/// Candidate new modes from the matched single-mode scan of the weighted residual
+/// ([`crate::mode_scan`]), as (frequency in Hz, damping): the `cfg.scan_trials` trial
+/// poles that remove the most weighted residual energy, each farther than
+/// `cfg.min_separation` from the candidates `tried` already (the residual's peaks) and
+/// than two half-power half-widths from a fitted mode (there the scan sees the mode's
+/// own coarse misfit; the split of a mode that is really two is the peaks' case).
+fn scan_candidates(
+    model: &AdditiveModel,
+    data: &FitData,
+    tried: &[(f64, Option<f64>)],
+    cfg: &CompleteConfig,
+) -> Vec<(f64, Option<f64>)> {
+    let mut resid = Vec::new();
+    model_cost(model, data, Some(&mut resid));
+    let modes = mode_list(model);
+    scan_residual(&resid, data, &cfg.scan, cfg.min_separation)
+        .into_iter()
+        .filter(|h| {
+            tried
+                .iter()
+                .all(|(f, _)| (h.f_hz - f).abs() > cfg.min_separation * f)
+                && modes
+                    .iter()
+                    .all(|(fm, zm)| (h.f_hz - fm).abs() > 2.0 * zm * fm)
+        })
+        .take(cfg.scan_trials)
+        .map(|h| (h.f_hz, Some(h.zeta)))
+        .collect()
+}
+
 /// Adds a mode at `f_hz` with damping `zeta` to `model`; a frequency inside the
 /// bandwidth of an existing mode (closer than `DUPLICATE` of its half-power half-width)
 /// is moved half a half-width away from it on its own side, so that the two poles start
@@ -618,17 +674,41 @@ pub fn complete_start(
     if add_modes {
         for round in 0..cfg.max_rounds {
             report.rounds = round + 1;
-            let cands = residual_candidates(&cur, data, unit_variance, cfg);
-            if cands.is_empty() {
-                break;
-            }
-            // all candidates of the round at once, else the strongest alone
+            let mut cands = residual_candidates(&cur, data, unit_variance, cfg);
+            cands.truncate(cfg.max_trials_per_round);
             // one candidate at a time, the strongest first: the first that lowers the
             // cost significantly is kept (a broad misfit has side peaks that a mode at
-            // its centre removes too)
+            // its centre removes too); when no residual peak gives one, the scan's
+            // best trial poles are tried (a missing mode the settled neighbours
+            // covered leaves no peak)
             let mut accepted = None;
-            for c in 0..cands.len().min(cfg.max_trials_per_round) {
-                let cand = &cands[c..=c];
+            let mut trials: Vec<Vec<(f64, Option<f64>)>> = cands.iter().map(|c| vec![*c]).collect();
+            let mut scanned = cfg.scan_trials == 0;
+            let mut paired = !cfg.pair_trials;
+            let mut c = 0;
+            loop {
+                if c == trials.len() && !scanned {
+                    scanned = true;
+                    let more = scan_candidates(&cur, data, &cands, cfg);
+                    cands.extend(more.iter().copied());
+                    trials.extend(more.into_iter().map(|c| vec![c]));
+                }
+                if c == trials.len() && !paired {
+                    // two missing modes that the settled neighbours share between them
+                    // (one broad mode over both) are found together or not at all
+                    paired = true;
+                    let k = cands.len().min(3);
+                    for a in 0..k {
+                        for b in a + 1..k {
+                            trials.push(vec![cands[a], cands[b]]);
+                        }
+                    }
+                }
+                if c == trials.len() {
+                    break;
+                }
+                let cand = &trials[c];
+                c += 1;
                 let mut trial = cur.clone();
                 let n_old = trial.submodels.len();
                 let mut ok = true;

@@ -25,6 +25,7 @@ pub mod complete;
 pub mod error;
 pub mod fitter;
 pub mod init;
+pub mod mode_scan;
 pub mod model;
 pub mod model_json;
 

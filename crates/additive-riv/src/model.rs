@@ -673,8 +673,9 @@ impl AdditiveModel {
         }
     }
 
-    /// True when every submodel's denominator roots are stable (left half plane, or
-    /// inside the unit circle in discrete time).
+    /// The submodels whose denominator roots are not all stable (left half plane, or
+    /// inside the unit circle in discrete time, where a root on the negative real axis
+    /// counts as unstable too: no continuous-time pole maps there through the hold).
     pub fn unstable_submodels(&self) -> Vec<usize> {
         let mut bad = Vec::new();
         for (i, s) in self.submodels.iter().enumerate() {
@@ -691,8 +692,11 @@ impl AdditiveModel {
             let unstable = match self.domain {
                 // roots in x of A(x); s = sigma x
                 Domain::Continuous => roots.iter().any(|x| x.re >= 0.0),
-                // roots in q of A(q); z = 1/q must be inside the unit circle
-                Domain::ZohDiscrete { .. } => roots.iter().any(|q| q.norm() <= 1.0),
+                // roots in q of A(q); z = 1/q must be inside the unit circle, and off
+                // the negative real axis, where no continuous-time pole maps
+                Domain::ZohDiscrete { .. } => roots
+                    .iter()
+                    .any(|q| q.norm() <= 1.0 || (q.im.abs() <= 1e-12 * q.norm() && q.re <= 0.0)),
             };
             if unstable {
                 bad.push(i);

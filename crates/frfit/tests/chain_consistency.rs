@@ -3,10 +3,11 @@
 //! 1-6 well-separated lightly damped modes, with or without a free rigid body, in
 //! continuous time or through an exact zero-order hold) are recovered from noise-free
 //! data to 1e-8 relative, and with noise the error against the truth falls with the
-//! noise. A method that joins the registry joins this test by its name alone: every
-//! chain runs in the tests that always run except the known failures (the `cmif`
-//! chains, and a few chain and seed pairs of the error-falls property), which run in
-//! `#[ignore]`d tests whose reasons give the numbers.
+//! noise and with the lines. A method that joins the registry joins this test by its
+//! name alone: every chain runs in the tests that always run except the known failures
+//! (the `cmif` chains in the noise-free property, and one chain and seed pair of the
+//! error-falls property), which run in `#[ignore]`d tests whose reasons give the
+//! numbers.
 
 use faer::Mat;
 use frf_data::{ChainSettings, DelayChoice, Frf, FrfDataset, ModelStructure};
@@ -14,6 +15,7 @@ use frfit::chain::{run_chain, AdditiveOptions, INITIALIZERS, REFINERS};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use realize::{FrfModel, Hold, ModalModel, PolePair};
 use std::f64::consts::TAU;
 
@@ -93,9 +95,10 @@ fn settings(truth: &FrfModel) -> ChainSettings {
     }
 }
 
-/// Initialisers whose chains fail the properties below (the reasons are in the
-/// `#[ignore]` of the tests that run them): their chains run only in those ignored
-/// tests, every other registered chain in the tests that always run.
+/// Initialisers whose chains fail the noise-free property below on some systems (the
+/// reason is in the `#[ignore]` of the test that runs them): their chains run that
+/// property only in the ignored test, every other registered chain in the one that
+/// always runs.
 const KNOWN_FAILING_INITS: &[&str] = &["cmif"];
 
 /// Every registered chain whose last link refines (a chain ending in `none` keeps the
@@ -154,27 +157,20 @@ fn recovers_noise_free(
 /// the even ones).
 const ERROR_FALLS_SEEDS: [u64; 3] = [3, 17, 29];
 
-/// Chains (initialiser, refiner) that fail the error-falls property on a seed, beyond
-/// those of [`KNOWN_FAILING_INITS`]; run only by the ignored test, whose reason gives
-/// the numbers.
-const KNOWN_ERROR_FALLS_FAILURES: &[(&str, &str, u64)] = &[
-    ("subspace", "riv", 3),
-    ("sk", "riv", 3),
-    ("subspace", "riv", 29),
-    ("subspace", "ml", 29),
-    ("sk", "ml", 29),
-];
+/// Chains (initialiser, refiner) that fail the error-falls property on a seed; run only
+/// by the ignored test, whose reason gives the numbers.
+const KNOWN_ERROR_FALLS_FAILURES: &[(&str, &str, u64)] = &[("cmif", "riv", 3), ("cmif", "ml", 3)];
 
 /// The (initialiser, refiner, seed) cases of the error-falls property: with `failing`
-/// the known failures (the chains of [`KNOWN_FAILING_INITS`] on every seed and
-/// [`KNOWN_ERROR_FALLS_FAILURES`]), otherwise every other refining chain on every seed
-/// of [`ERROR_FALLS_SEEDS`], so that a newly registered chain joins the test that runs.
+/// the known failures ([`KNOWN_ERROR_FALLS_FAILURES`]), otherwise every other refining
+/// chain (those of [`KNOWN_FAILING_INITS`] too: their failures are on other systems) on
+/// every seed of [`ERROR_FALLS_SEEDS`], so that a newly registered chain joins the test
+/// that runs.
 fn error_falls_cases(failing: bool) -> Vec<(&'static str, &'static str, u64)> {
     let mut v = Vec::new();
     for seed in ERROR_FALLS_SEEDS {
         for (init, refine) in chains(false).into_iter().chain(chains(true)) {
-            let known = KNOWN_FAILING_INITS.contains(&init)
-                || KNOWN_ERROR_FALLS_FAILURES.contains(&(init, refine, seed));
+            let known = KNOWN_ERROR_FALLS_FAILURES.contains(&(init, refine, seed));
             if known == failing {
                 v.push((init, refine, seed));
             }
@@ -183,16 +179,25 @@ fn error_falls_cases(failing: bool) -> Vec<(&'static str, &'static str, u64)> {
     v
 }
 
+/// Noise realisations of the lines criterion: the error of one realisation spreads by
+/// a factor of 2 to 4 (seed 3, subspace+riv, 600 lines: 1.8e-5 .. 4.8e-5), so the
+/// ratio of two medians of 3 realisations spread from 1.26 to 2.2 on the same chain and
+/// seed; the root mean square of 12 keeps it within about 10 % of its expectation.
+const LINES_REALISATIONS: u64 = 12;
+
 /// For every case (initialiser, refiner, seed) of `cases`: the median error against the
 /// truth (the middle of three noise realisations) falls at least 5x when the noise
-/// falls 10x (1e-3 -> 1e-4, 600 lines), and at least 1.6x with 4x the lines (600 ->
-/// 2400, noise 1e-3; sqrt(4) = 2 for a consistent estimator).
+/// falls 10x (1e-3 -> 1e-4, 600 lines), and the root-mean-square error over
+/// [`LINES_REALISATIONS`] realisations falls at least 1.6x with 4x the lines (600 ->
+/// 2400, noise 1e-3; sqrt(4) = 2 for a consistent estimator whose error variance falls
+/// as 1 / lines).
 fn error_falls(cases: &[(&str, &str, u64)]) {
     for &(init, refine, seed) in cases {
         let truth = system(seed, seed % 2 == 0);
-        let run = |lines: usize, noise: f64| -> f64 {
-            // the median over a few noise realisations keeps the ratio stable
-            let mut errs: Vec<f64> = (0..3)
+        // realisations are independent: both cores run them
+        let run = |lines: usize, noise: f64, realisations: u64| -> Vec<f64> {
+            (0..realisations)
+                .into_par_iter()
                 .map(|r| {
                     let d = data(&truth, lines, noise, seed * 100 + r);
                     let out = run_chain(
@@ -205,19 +210,28 @@ fn error_falls(cases: &[(&str, &str, u64)]) {
                     .unwrap_or_else(|e| panic!("{init}+{refine} on seed {seed}: {e}"));
                     error(&out.model.model, &truth, &d)
                 })
-                .collect();
+                .collect()
+        };
+        let median3 = |mut errs: Vec<f64>| -> f64 {
+            errs.truncate(3);
             errs.sort_by(|a, b| a.total_cmp(b));
             errs[1]
         };
-        let (e3, e4) = (run(600, 1e-3), run(600, 1e-4));
+        let rms = |errs: &[f64]| -> f64 {
+            (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt()
+        };
+        let few = run(600, 1e-3, LINES_REALISATIONS);
+        let (e3, e4) = (median3(few.clone()), median3(run(600, 1e-4, 3)));
         assert!(
             e3 / e4 >= 5.0,
             "{init}+{refine} seed {seed}: noise 1e-3 -> {e3:.3e}, 1e-4 -> {e4:.3e}"
         );
-        let e_many = run(2400, 1e-3);
+        let many = run(2400, 1e-3, LINES_REALISATIONS);
+        let (r_few, r_many) = (rms(&few), rms(&many));
         assert!(
-            e3 / e_many >= 1.6,
-            "{init}+{refine} seed {seed}: 600 lines {e3:.3e}, 2400 lines {e_many:.3e}"
+            r_few / r_many >= 1.6,
+            "{init}+{refine} seed {seed}: rms error over {LINES_REALISATIONS} realisations \
+             600 lines {r_few:.3e}, 2400 lines {r_many:.3e}"
         );
     }
 }
@@ -234,7 +248,7 @@ proptest! {
 
     /// The chains of [`KNOWN_FAILING_INITS`].
     #[test]
-    #[ignore = "fails for the cmif chains on about 4 % of the systems even with the start completion (seeds 0..150, both holds: 20 of 600 cmif runs): seed 19 (3.7e-2, the 214 Hz mode never tried), 59 (1.4e-2), 73 (7.4e-2), 128 hold (1.2e-1) and 141 hold (4.1e-1) for cmif+riv; cmif+ml also errs on 39, 109, 140 (not identifiable) and 141 (unstable optimum); seeds 1142, 1149, 1575, 5675 and 16 pass (cmif_start_completion_recovers_missed_modes); run with --ignored"]
+    #[ignore = "fails for the cmif chains on about 0.8 % of the systems (seeds 0..300, both holds, cmif+riv and cmif+ml: 10 of 1200 runs; 16 of the 600 runs of seeds 0..150 before the residual scan of the completion): seed 73 hold (7.7e-2), 128 hold (1.2e-1), 144 hold (2.7e-2), 275 (5.0e-2) for both refiners, 170 (1.1e-1) for riv, and 253 hold for riv (the refined model has a discrete pole on the negative real axis, reported as an error); in each a start mode settled onto a true mode the CMIF did not show and the trials at the mode it left settled onto a neighbour; seeds 19, 59, 141 and 16, 1142, 1149, 1575, 5675 pass (cmif_start_completion_recovers_missed_modes); run with --ignored"]
     fn noise_free_data_are_recovered_by_the_cmif_chains(seed in 0u64..10_000, hold in any::<bool>()) {
         recovers_noise_free(&chains(true), seed, hold)?;
     }
@@ -268,10 +282,9 @@ fn error_falls_with_the_noise_and_with_the_lines() {
     error_falls(&cases);
 }
 
-/// The known failures of the property above ([`KNOWN_FAILING_INITS`] on every seed,
-/// [`KNOWN_ERROR_FALLS_FAILURES`]).
+/// The known failures of the property above ([`KNOWN_ERROR_FALLS_FAILURES`]).
 #[test]
-#[ignore = "known failures, medians of 3 realisations: the cmif chains (with the start completion every run of seeds 3, 17, 29 has the true structure and 10x less noise gives exactly 10x less error, but 4x the lines lowers the median of 3 realisations only 1.2x on seed 3 (1.0e-5 -> 8.3e-6; its realisations at 600 lines: 2.7e-5, 4.6e-6, 1.0e-5) and 1.04x on seed 17 (1.39e-5 -> 1.33e-5), while 150 -> 9600 lines gives 3.6e-5, 2.4e-5, 1.4e-5, 1.3e-5, 6.3e-6 on seed 17: 5.7x for 64x the lines; 3 realisations cannot show 1.6x reliably). subspace+riv and sk+riv on seed 3 (1 x 3, 4 modes): 600 -> 2400 lines 2.551e-5 -> 2.025e-5 (1.26x; both starts end at the same riv optimum, realisations 1.77e-5..3.12e-5 and 6.95e-6..2.83e-5, the noise ratio is 10.0x; subspace+ml and sk+ml reach 1.94x there); subspace+riv on seed 29 (3 x 2, 6 modes): 3.401e-5 -> 2.274e-5 (1.50x; sk+riv 1.80x); subspace+ml on seed 29: ml ends at an unstable optimum on 2 of 3 realisations at 600 lines, noise 1e-3 (77.142 Hz, damping -1.63e-2; 212.962 Hz, damping -8.27e-4), reported as an error; sk+ml on seed 29: the same on 1 of 3 (33336.6 Hz, damping -1); run with --ignored"]
+#[ignore = "known failure of the lines criterion, root mean square over 12 realisations: cmif+riv and cmif+ml on seed 3 (1 x 3, 4 modes; both end at the same optimum) fall 1.57x for 4x the lines (median 1.30x, mean 1.50x), where the subspace and sk starts reach 1.79-1.80x on that seed; the cmif chains' errors at 600 lines are lower (median 1.9e-5 against 4.5e-5 for subspace+ml), so they have less to gain; 10x less noise gives 10x less error. Run with --ignored"]
 fn error_falls_with_the_noise_and_with_the_lines_known_failures() {
     error_falls(&error_falls_cases(true));
 }
@@ -299,9 +312,12 @@ proptest! {
 /// noise-free data to 1e-8. Seed 5675 is a well damped mode above the others that
 /// dominates the response from its resonance up, so that the eq. (27)-weighted residual
 /// shows no peak there (the plain residual does); seed 16 starts from 2 of 4 modes.
+/// Seeds 19, 59 and 141 need the residual scan ([`additive_riv::mode_scan`]): a mode
+/// between two others that their settled poles widened to cover (19: 214 Hz between
+/// 123 and 326 Hz), or that a start mode left for a mode the CMIF did not show (59).
 #[test]
 fn cmif_start_completion_recovers_missed_modes() {
-    for seed in [16u64, 1142, 1149, 1575, 5675] {
+    for seed in [16u64, 19, 59, 141, 1142, 1149, 1575, 5675] {
         for hold in [false, true] {
             let truth = system(seed, hold);
             let d = data(&truth, 600, 0.0, seed);
