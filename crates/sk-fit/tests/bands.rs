@@ -76,6 +76,11 @@ fn config(bands: BandSpec) -> MultiBandConfig {
         sk: SkConfig {
             delay: DelayChoice::None,
             weighting: Weighting::Uniform,
+            // exact data: every order is significant, so the sweeps stop at a 3 % fit
+            // (weighted cost 1e-3 of the weighted energy) or at order 50 (every SK fit,
+            // one band or several, at most 50 poles: a test of seconds, not minutes)
+            exact_rel_cost: 1e-3,
+            max_order: 50,
             ..Default::default()
         },
         ..Default::default()
@@ -97,7 +102,7 @@ fn fit(data: &Frf, bands: BandSpec) -> (FrfModel, BandsReport, f64) {
 #[test]
 fn auto_bands_beat_one_band_on_a_wide_band_plant() {
     let plant = jue_example_2(2);
-    let data = exact_data(&plant, 800);
+    let data = exact_data(&plant, 400);
     let (one, r1, s1) = fit(&data, BandSpec::Single);
     let e1 = rel_error(&one, &data);
     println!(
@@ -118,7 +123,116 @@ fn auto_bands_beat_one_band_on_a_wide_band_plant() {
     assert!((e1 - r1.rel_error).abs() < 1e-9 * e1.max(1.0));
     assert!((em - rm.rel_error).abs() < 1e-9 * em.max(1.0));
     assert!(rm.bands.len() >= 2, "{rm:?}");
+    assert_eq!(r1.bands.len(), 1);
+    // every band holds poles, and the passes kept the best total error
+    assert!(rm.bands.iter().all(|b| b.pairs > 0), "{:?}", rm.bands);
+    let best = rm
+        .passes
+        .iter()
+        .map(|p| p.rel_error)
+        .fold(f64::INFINITY, f64::min);
+    assert!((rm.passes[rm.kept_pass - 1].rel_error - best).abs() <= 1e-12);
     assert!(multi.is_stable() && one.is_stable());
     assert!(em < e1, "multi-band {em:.4} is not below one band {e1:.4}");
     assert!(em < 0.17, "multi-band {em:.4} is not below Jue's 0.17");
+}
+
+/// A 1 x 2 plant with a free rigid body and two clusters of three modes (2-4 Hz and
+/// 40-80 Hz), exact data on 300 lines over 0.5..150 Hz.
+fn two_clusters() -> (ModalPlant, Frf) {
+    let mut b = ModalPlantBuilder::new(1, 2)
+        .rigid_body(faer::Mat::from_fn(1, 2, |_, j| [0.3, -0.2][j] * 100.0));
+    for (f, z, c, bb) in [
+        (2.0, 0.02, 1.0, [1.0, 0.5]),
+        (3.1, 0.03, -0.8, [0.7, 1.0]),
+        (4.2, 0.02, 0.6, [1.0, -0.4]),
+        (40.0, 0.01, 1.0, [0.5, 1.0]),
+        (57.0, 0.02, -0.7, [1.0, 0.8]),
+        (80.0, 0.015, 0.9, [-0.6, 1.0]),
+    ] {
+        let w = TAU * f;
+        b = b.mode(f, z, vec![c * w], vec![bb[0] * w, bb[1] * w]);
+    }
+    let plant = b.build().unwrap();
+    let f: Vec<f64> = (0..300)
+        .map(|k| 0.5 * 300f64.powf(k as f64 / 299.0))
+        .collect();
+    let g = plant.continuous_response(&f).unwrap();
+    let data = Frf::new(f, 1, 2, g.values, None).unwrap();
+    (plant, data)
+}
+
+/// Given cut-offs: each cluster is fitted in its band, the rigid body in the lowest band
+/// only, and the sum reproduces the exact data.
+#[test]
+fn given_cut_offs_fit_each_cluster_in_its_band() {
+    let (_, data) = two_clusters();
+    let mut cfg = config("10".parse().unwrap());
+    cfg.sk.exact_rel_cost = 1e-16;
+    cfg.sk.max_order = 16;
+    let f = MultiBandSk::new(cfg).estimate(&data, ()).unwrap();
+    let r = &f.report;
+    for m in &f.messages {
+        println!("  {m}");
+    }
+    assert_eq!(r.cut_offs_hz, vec![10.0]);
+    assert_eq!(r.bands.len(), 2);
+    assert_eq!(r.bands[0].integrators, 2, "{:?}", r.bands[0]);
+    assert_eq!(r.bands[1].integrators, 0);
+    assert!(r.bands[1].feedthrough && !r.bands[0].feedthrough);
+    assert_eq!(f.model.modal.rigid.len(), 2);
+    let e = rel_error(&f.model, &data);
+    assert!(e < 1e-6, "relative error {e:.3e}");
+    assert!(f.model.is_stable());
+    // each band's resonances are the ones of its cluster
+    let in_band = |b: usize, lo: f64, hi: f64| {
+        f.model
+            .modal
+            .pairs
+            .iter()
+            .filter(|p| {
+                p.residue.norm_l2() > 1e-6 * p.pole.norm() && {
+                    let fh = p.f_hz();
+                    fh > lo && fh < hi
+                }
+            })
+            .count()
+            >= 3
+            && r.bands[b].pairs >= 3
+    };
+    assert!(
+        in_band(0, 1.9, 4.3) && in_band(1, 39.0, 81.0),
+        "{:?}",
+        f.model.modal.mode_summaries()
+    );
+}
+
+/// Cut-offs outside the data name the empty band; one order for several bands and a
+/// tiered weight outside [0, 1] are rejected.
+#[test]
+fn bad_band_settings_are_named() {
+    let (_, data) = two_clusters();
+    let err = |cfg: MultiBandConfig| {
+        MultiBandSk::new(cfg)
+            .estimate(&data, ())
+            .unwrap_err()
+            .to_string()
+    };
+    let e = err(config("10,200".parse().unwrap()));
+    assert!(
+        e.contains("band 3 (200 .. inf Hz) holds no lines") && e.contains("150"),
+        "{e}"
+    );
+    let e = err(config("0.1,0.2".parse().unwrap()));
+    assert!(e.contains("band 1 (0 .. 0.1 Hz) holds no lines"), "{e}");
+    let mut cfg = config("10".parse().unwrap());
+    cfg.sk.order = Some(12);
+    let e = err(cfg);
+    assert!(e.contains("one order for 2 bands is ambiguous"), "{e}");
+    let mut cfg = config("10".parse().unwrap());
+    cfg.orders = vec![12];
+    assert!(err(cfg).contains("one order per band is needed: 2 band(s)"));
+    let mut cfg = config(BandSpec::Auto);
+    cfg.q_high = 2.0;
+    assert!(err(cfg).contains("q_high"));
 }

@@ -35,7 +35,7 @@
 use super::auto::{auto_cut_offs, AutoBands, GapCandidate};
 use super::spec::{assign_lines, BandSpec};
 use crate::{fit_residues, BasisChoice, OrderScore, PoleSet, Prepared, SkConfig, SkError, SkInit};
-use frf_data::cmif::{cmif, pick_peaks};
+use frf_data::cmif::{cmif, pick_peaks, Cmif};
 use frf_data::{Convergence, DelayChoice, Estimator, Fit, Frf, FrfDataset, Weighting};
 use realize::{FrfModel, Hold, KnownFactors, ModalModel, C64};
 use serde::{Deserialize, Serialize};
@@ -61,6 +61,11 @@ pub struct MultiBandConfig {
     /// [`SkInit`] in the first pass, starting at `2 p - 4` for `p` CMIF peaks in the
     /// band. Default: empty. With one band, `sk.order` is used as well.
     pub orders: Vec<usize>,
+    /// SK iterations (after the Levy start) of each band fit, at most, with more than
+    /// one band (one band keeps `sk.iter`): the band fits are repeated in every pass,
+    /// and Jue's Table 2 reports 2 to 8 SK iterations per band and pass (on exact data
+    /// the SK iterations oscillate rather than converge, Jue section 2.2.3). Default: 8.
+    pub band_max_iter: usize,
     /// The automatic cut-offs. Default: [`AutoBands::default`].
     pub auto: AutoBands,
     /// A band with fewer lines is an error. Default: 8.
@@ -80,6 +85,7 @@ impl Default for MultiBandConfig {
             max_passes: 8,
             pass_tol: 1e-3,
             orders: Vec::new(),
+            band_max_iter: 8,
             auto: AutoBands::default(),
             min_band_lines: 8,
             sk: SkConfig::default(),
@@ -90,7 +96,7 @@ impl Default for MultiBandConfig {
 impl MultiBandConfig {
     fn check(&self) -> Result<(), SkError> {
         for (name, q) in [("q_low", self.q_low), ("q_high", self.q_high)] {
-            if !(q.is_finite() && q >= 0.0 && q <= 1.0) {
+            if !(0.0..=1.0).contains(&q) {
                 return Err(SkError::config(
                     name,
                     q,
@@ -319,6 +325,7 @@ impl MultiBandSk {
         residual: Vec<C64>,
         delay: DelayChoice,
         order: Option<usize>,
+        data_cmif: Option<&Arc<Cmif>>,
     ) -> Result<BandFit, SkError> {
         let base = &self.config.sk;
         let band = &bands[b];
@@ -328,19 +335,28 @@ impl MultiBandSk {
         c.weighting = Weighting::User(band.weights.clone());
         c.delay = delay;
         c.order = order;
-        c.start_from_peaks = false;
-        c.min_order = base
-            .min_order
-            .max((2 * band.peaks).saturating_sub(4))
-            .min(base.max_order);
+        if nb > 1 {
+            // the sweep starts from the band's own CMIF peaks
+            c.start_from_peaks = false;
+            c.min_order = base
+                .min_order
+                .max((2 * band.peaks).saturating_sub(4))
+                .min(base.max_order);
+        }
+        if nb > 1 {
+            c.iter.max_iter = c.iter.max_iter.min(self.config.band_max_iter.max(1));
+        }
         c.stabilize = false;
         c.feedthrough = base.feedthrough && is_last;
         if b > 0 {
             c.rigid_tol = 0.0;
         }
         if !matches!(delay, DelayChoice::Auto) {
-            c.precomputed = Default::default();
+            c.precomputed.delay = None;
         }
+        // the data's CMIF serves one band (its residual is the data); the sweeps of
+        // several bands start from the band's peaks instead
+        c.precomputed.cmif = if nb == 1 { data_cmif.cloned() } else { None };
         let prewarp_ok = match (base.basis, base.hold) {
             (BasisChoice::Auto, Hold::Zoh { .. }) => false,
             (BasisChoice::Auto, _) | (BasisChoice::Bilinear { a: None }, _) => true,
@@ -404,28 +420,22 @@ impl MultiBandSk {
         data: &D,
         lines: &Lines,
         report: &mut BandsReport,
+        cmif_out: &mut Option<Arc<Cmif>>,
     ) -> Result<Vec<Band>, SkError> {
         let cfg = &self.config;
-        let need_cmif = matches!(cfg.bands, BandSpec::Auto)
-            || (cfg.orders.is_empty() && !matches!(cfg.bands, BandSpec::Single));
-        let computed;
-        let peaks = if need_cmif {
-            let c = match cfg.sk.precomputed.cmif_of(data) {
-                Some(c) => c,
-                None => {
-                    computed = cmif(data)?;
-                    &computed
-                }
-            };
-            let p = pick_peaks(c, &cfg.sk.peaks);
-            report.cmif_peaks = Some(p.len());
-            if matches!(cfg.bands, BandSpec::Auto) {
-                report.auto_cuts = auto_cut_offs(c, &p, &cfg.auto);
-            }
-            p.iter().map(|p| p.f_hz).collect()
-        } else {
-            Vec::new()
+        let c: Arc<Cmif> = match cfg.sk.precomputed.cmif_of(data) {
+            Some(_) => cfg.sk.precomputed.cmif.clone().ok_or_else(|| {
+                SkError::numerical("multi-band fit", "the precomputed CMIF vanished")
+            })?,
+            None => Arc::new(cmif(data)?),
         };
+        let p = pick_peaks(&c, &cfg.sk.peaks);
+        report.cmif_peaks = Some(p.len());
+        if matches!(cfg.bands, BandSpec::Auto) {
+            report.auto_cuts = auto_cut_offs(&c, &p, &cfg.auto);
+        }
+        let peaks: Vec<f64> = p.iter().map(|p| p.f_hz).collect();
+        *cmif_out = Some(c);
         let cuts: Vec<f64> = match &cfg.bands {
             BandSpec::Auto => {
                 // a cut exactly on a line puts that line in the upper band
@@ -537,7 +547,8 @@ impl Estimator for MultiBandSk {
             ..Default::default()
         };
         let t = Instant::now();
-        let bands = self.plan(data, &lines, &mut report)?;
+        let mut data_cmif = None;
+        let bands = self.plan(data, &lines, &mut report, &mut data_cmif)?;
         let t_plan = t.elapsed();
         let nb = bands.len();
         let mut messages = Vec::new();
@@ -546,6 +557,8 @@ impl Estimator for MultiBandSk {
         } else {
             cfg.orders.iter().map(|&n| Some(n)).collect()
         };
+        // the weighted energy of the data, sum w |G|^2 / (2 L): the cost of the zero model
+        let energy = lines.errors(&vec![C64::new(0.0, 0.0); l * m]).0;
         let mut fits: Vec<Option<BandFit>> = vec![None; nb];
         let mut factors: Option<KnownFactors> = None;
         let mut best: Option<(f64, usize, Vec<BandFit>)> = None;
@@ -580,7 +593,15 @@ impl Estimator for MultiBandSk {
                     Some(f) if f.delay_fitted => DelayChoice::Start { seconds: f.delay_s },
                     Some(f) => DelayChoice::Fixed { seconds: f.delay_s },
                 };
-                match self.fit_band(&lines, &bands, b, residual, delay, orders[b]) {
+                match self.fit_band(
+                    &lines,
+                    &bands,
+                    b,
+                    residual,
+                    delay,
+                    orders[b],
+                    data_cmif.as_ref(),
+                ) {
                     Ok(f) => {
                         if factors.is_none() {
                             factors = Some(f.model.factors.clone());
@@ -633,11 +654,15 @@ impl Estimator for MultiBandSk {
                 stop = "one band: nothing to iterate".into();
                 break;
             }
-            if cost <= cfg.sk.exact_rel_cost * report.passes[0].weighted_cost.max(0.0) {
+            if cost <= cfg.sk.exact_rel_cost * energy {
                 convergence = Convergence::CostTolerance {
                     relative_change: 0.0,
                 };
-                stop = format!("pass {pass}: an exact fit");
+                stop = format!(
+                    "pass {pass}: the total weighted error is below {:.1e} of the data's \
+                     (the exact-fit level of the SK settings)",
+                    cfg.sk.exact_rel_cost
+                );
                 break;
             }
             if let Some(p) = prev {
