@@ -16,8 +16,8 @@
 //!    level of the lower of the two peaks (negative; the deeper and flatter, the better).
 //! 5. Cut `j` of `B - 1` aims at the gap after peak `round(j p / B)` (equal numbers of
 //!    peaks per band) and takes the gap of best merit within `max(1, p / (4 B))` gaps
-//!    of that aim (and beyond the previous cut): balance first, then the flattest
-//!    valley nearby.
+//!    of that aim (beyond the previous cut, and leaving a gap for each cut still to
+//!    come): balance first, then the flattest valley nearby.
 
 use frf_data::cmif::{Cmif, CmifPeak};
 use serde::{Deserialize, Serialize};
@@ -135,8 +135,10 @@ pub fn auto_cut_offs(cmif: &Cmif, peaks: &[CmifPeak], cfg: &AutoBands) -> Vec<Ga
         // gap g lies between peaks g and g + 1
         let aim = ((j * p) as f64 / n_bands as f64).round() as usize;
         let aim = aim.saturating_sub(1).min(p - 2);
-        let lo = aim.saturating_sub(radius).max(next_gap);
-        let hi = (aim + radius).min(p - 2);
+        // beyond the previous cut, and leaving a gap for each cut still to come
+        let last = (p - 2).saturating_sub(n_bands - 1 - j);
+        let lo = aim.saturating_sub(radius).max(next_gap).min(last);
+        let hi = (aim + radius).min(last).max(lo);
         let best = (lo..=hi)
             .filter_map(|g| gaps[g].as_ref().map(|c| (g, c)))
             .min_by(|x, y| x.1.merit_db.total_cmp(&y.1.merit_db));
@@ -186,34 +188,41 @@ mod tests {
         let data = Frf::new(freq, 1, 1, g.values, None).unwrap();
         let c = cmif(&data).unwrap();
         let peaks = pick_peaks(&c, &PeakConfig::default());
-        assert_eq!(peaks.len(), 6, "{peaks:?}");
+        let mut pf: Vec<f64> = peaks.iter().map(|p| p.f_hz).collect();
+        pf.sort_by(f64::total_cmp);
+        let p = pf.len();
+        assert!(p >= 4 && pf[1] < 5.0 && pf[p - 2] > 35.0, "{pf:?}");
+        // half the peaks per band: one cut, in the valley between the clusters
         let cfg = AutoBands {
-            modes_per_band: 3,
+            modes_per_band: p.div_ceil(2),
             ..Default::default()
         };
         let cuts = auto_cut_offs(&c, &peaks, &cfg);
         assert_eq!(cuts.len(), 1, "{cuts:?}");
         assert!(cuts[0].f_hz > 4.4 && cuts[0].f_hz < 36.0, "{cuts:?}");
+        assert!(cuts[0].merit_db < 0.0, "{cuts:?}");
+        // one peak per band: a cut between every two neighbouring peaks
         let one = AutoBands {
             modes_per_band: 1,
             max_bands: 10,
             ..Default::default()
         };
         let cuts = auto_cut_offs(&c, &peaks, &one);
-        assert_eq!(cuts.len(), 5, "{cuts:?}");
-        let mut pf: Vec<f64> = peaks.iter().map(|p| p.f_hz).collect();
-        pf.sort_by(f64::total_cmp);
+        assert_eq!(cuts.len(), p - 1, "{cuts:?}");
         for (j, cut) in cuts.iter().enumerate() {
             assert!(cut.f_hz > pf[j] && cut.f_hz < pf[j + 1], "{cuts:?} {pf:?}");
         }
-        // the default aims at 5 peaks per band: 6 peaks make two bands
-        let cuts = auto_cut_offs(&c, &peaks, &AutoBands::default());
-        assert_eq!(cuts.len(), 1, "{cuts:?}");
-        assert!(cuts[0].f_hz > 4.4 && cuts[0].f_hz < 36.0, "{cuts:?}");
-        let few = AutoBands {
-            modes_per_band: 6,
+        // at most max_bands
+        let two = AutoBands {
+            max_bands: 2,
+            ..one
+        };
+        assert_eq!(auto_cut_offs(&c, &peaks, &two).len(), 1);
+        // as many peaks per band as there are: one band, no cut
+        let all = AutoBands {
+            modes_per_band: p,
             ..Default::default()
         };
-        assert!(auto_cut_offs(&c, &peaks, &few).is_empty());
+        assert!(auto_cut_offs(&c, &peaks, &all).is_empty());
     }
 }
