@@ -236,3 +236,29 @@ fn bad_band_settings_are_named() {
     cfg.q_high = 2.0;
     assert!(err(cfg).contains("q_high"));
 }
+
+/// `auto` leaves out a cut that would make a band of fewer than `min_band_lines` lines:
+/// with one CMIF peak per band the two clusters' peaks are a few lines apart, and a
+/// large minimum merges the bands of each cluster.
+#[test]
+fn auto_cuts_keep_every_band_above_the_line_minimum() {
+    let (_, data) = two_clusters();
+    let mut cfg = config(BandSpec::Auto);
+    cfg.auto.modes_per_band = 1;
+    cfg.auto.max_bands = 10;
+    cfg.min_band_lines = 100;
+    cfg.sk.max_order = 16;
+    let f = MultiBandSk::new(cfg).estimate(&data, ()).unwrap();
+    let r = &f.report;
+    // some of the cuts between neighbouring peaks were left out, none of the bands is
+    // short
+    let peaks = r.cmif_peaks.unwrap();
+    assert!(
+        peaks >= 3 && r.bands.len() < peaks,
+        "{peaks} peaks: {:?}",
+        r.bands
+    );
+    assert!(r.bands.iter().all(|b| b.lines >= 100), "{:?}", r.bands);
+    assert_eq!(r.cut_offs_hz.len(), r.bands.len() - 1);
+    assert_eq!(r.auto_cuts.len(), r.cut_offs_hz.len());
+}

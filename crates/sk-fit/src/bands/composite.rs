@@ -438,7 +438,21 @@ impl MultiBandSk {
         *cmif_out = Some(c);
         let cuts: Vec<f64> = match &cfg.bands {
             BandSpec::Auto => {
-                // a cut exactly on a line puts that line in the upper band
+                // a cut exactly on a line puts that line in the upper band; a cut that
+                // would leave a band with fewer than `min_band_lines` lines is left out
+                // (its band merges with the next)
+                let f = &lines.freq_hz;
+                let min = cfg.min_band_lines.max(1);
+                let mut kept: Vec<GapCandidate> = Vec::new();
+                let mut start = 0;
+                for c in &report.auto_cuts {
+                    let at = f.partition_point(|&x| x < c.f_hz);
+                    if at - start.min(at) >= min && f.len() - at >= min {
+                        kept.push(c.clone());
+                        start = at;
+                    }
+                }
+                report.auto_cuts = kept;
                 report.auto_cuts.iter().map(|c| c.f_hz).collect()
             }
             BandSpec::Single => Vec::new(),
