@@ -342,8 +342,6 @@ impl MultiBandSk {
                 .min_order
                 .max((2 * band.peaks).saturating_sub(4))
                 .min(base.max_order);
-        }
-        if nb > 1 {
             c.iter.max_iter = c.iter.max_iter.min(self.config.band_max_iter.max(1));
         }
         c.stabilize = false;
@@ -376,7 +374,8 @@ impl MultiBandSk {
         let fit = SkInit::new(c.clone()).estimate(&frf, ())?;
         let mut model = fit.model;
         let modal = &model.modal;
-        let dropped = modal.pairs.iter().filter(|p| p.pole.re >= 0.0).count()
+        // poles, a pair counting two
+        let dropped = 2 * modal.pairs.iter().filter(|p| p.pole.re >= 0.0).count()
             + modal.real_poles.iter().filter(|p| p.pole >= 0.0).count();
         if dropped > 0 {
             let set = PoleSet {
