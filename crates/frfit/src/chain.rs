@@ -30,9 +30,35 @@ use frf_data::{
     RefineLink, Refiner,
 };
 use ml_refine::{MlConfig, MlRefine};
+use sk_fit::bands::{BandSpec, MultiBandConfig, MultiBandSk};
 use sk_fit::{SkConfig, SkInit};
 
-/// Options of the additive links that the pipeline sets beyond [`ChainSettings`].
+/// The multi-band composite fit of the SK initialiser (Jue 2.3; `--bands`,
+/// `--band-weights`): with it, `--init sk` fits the bands of `spec` with the tiered
+/// weights `q_low` below and `q_high` above each band (see [`MultiBandSk`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkBands {
+    /// The bands: `auto`, one, or the cut-offs in Hz.
+    pub spec: BandSpec,
+    /// `Q_l`, the weight of the lines below a band. Default: 1e-1.
+    pub q_low: f64,
+    /// `Q_h`, the weight of the lines above a band. Default: 1e-4.
+    pub q_high: f64,
+}
+
+impl Default for SkBands {
+    fn default() -> Self {
+        let d = MultiBandConfig::default();
+        Self {
+            spec: d.bands,
+            q_low: d.q_low,
+            q_high: d.q_high,
+        }
+    }
+}
+
+/// Options of the links that the pipeline sets beyond [`ChainSettings`] (most of them
+/// for the additive links).
 #[derive(Debug, Clone)]
 pub struct AdditiveOptions {
     /// Refined IV iteration settings (method, tolerances).
@@ -50,6 +76,10 @@ pub struct AdditiveOptions {
     /// passes `None` (its loop adds the modes itself and is validated on the reference
     /// files with the plain start).
     pub complete_start: Option<CompleteConfig>,
+    /// The multi-band composite fit of the `sk` initialiser; `None`: one SK fit of the
+    /// whole band (the default). Only `sk` takes bands: [`run_chain`] rejects them for a
+    /// chain without it.
+    pub sk_bands: Option<SkBands>,
 }
 
 impl Default for AdditiveOptions {
@@ -60,6 +90,7 @@ impl Default for AdditiveOptions {
             rigid_body: RigidBody::Auto,
             realizations: None,
             complete_start: Some(CompleteConfig::default()),
+            sk_bands: None,
         }
     }
 }
@@ -108,21 +139,34 @@ fn make_cmif(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Initializer> {
     })
 }
 
-fn make_sk(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer> {
-    Box::new(InitLink {
-        name: "sk".into(),
-        estimator: SkInit::new(SkConfig {
-            order: s.order,
-            peaks: s.peaks.clone(),
-            hold: s.hold,
-            delay: s.delay,
-            derivative_order: s.derivative_order,
-            weighting: s.weighting.clone(),
-            precomputed: s.precomputed.clone(),
-            progress: s.progress.clone(),
-            ..Default::default()
+fn make_sk(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Initializer> {
+    let sk = SkConfig {
+        order: s.order,
+        peaks: s.peaks.clone(),
+        hold: s.hold,
+        delay: s.delay,
+        derivative_order: s.derivative_order,
+        weighting: s.weighting.clone(),
+        precomputed: s.precomputed.clone(),
+        progress: s.progress.clone(),
+        ..Default::default()
+    };
+    match &o.sk_bands {
+        None => Box::new(InitLink {
+            name: "sk".into(),
+            estimator: SkInit::new(sk),
         }),
-    })
+        Some(b) => Box::new(InitLink {
+            name: "sk".into(),
+            estimator: MultiBandSk::new(MultiBandConfig {
+                bands: b.spec.clone(),
+                q_low: b.q_low,
+                q_high: b.q_high,
+                sk,
+                ..Default::default()
+            }),
+        }),
+    }
 }
 
 fn make_subspace(s: &ChainSettings, _o: &AdditiveOptions) -> Box<dyn Initializer> {
@@ -182,7 +226,7 @@ pub const INITIALIZERS: &[InitEntry] = &[
     },
     InitEntry {
         name: "sk",
-        description: "Sanathanan-Koerner common denominator (Jue 2.2, 2.4), order by F-test sweep, residues by least squares",
+        description: "Sanathanan-Koerner common denominator (Jue 2.2, 2.4), order by F-test sweep, residues by least squares; with --bands, Bayard's multi-band composite (Jue 2.3)",
         make: make_sk,
     },
 ];
@@ -468,6 +512,19 @@ pub fn run_chain(
 ) -> Result<ChainResult, FrfitError> {
     let names = init_names(init)?;
     refiner(refine, s, o)?;
+    if let Some(b) = &o.sk_bands {
+        if !names.iter().any(|n| n == "sk") {
+            return Err(FrfitError::argument(
+                "--bands",
+                b.spec.to_string(),
+                format!(
+                    "bands are a setting of the SK initialiser (Bayard's multi-band fit, \
+                     --init sk); the chain's initialiser is {}",
+                    names.join(", ")
+                ),
+            ));
+        }
+    }
     if let [one] = names.as_slice() {
         return run_single(data, one, refine, s, o);
     }

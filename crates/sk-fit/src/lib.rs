@@ -15,9 +15,13 @@
 //!   factors (delay, hold, derivative order), the order given or chosen by an F-test
 //!   sweep, poles mapped back to `s`, the model currency [`realize::FrfModel`].
 //!
-//! Not here (yet): Bayard's multi-band composite fit (Jue 2.3), Gilbert realization and
-//! balanced truncation.
+//! - [`bands::MultiBandSk`]: Bayard's multi-band composite fit with Jue's tiered
+//!   weights (section 2.3): bands given or chosen from the CMIF, each band an SK fit of
+//!   the data minus the other bands' models, the sum in the model currency.
+//!
+//! Not here (yet): Gilbert realization and balanced truncation.
 
+pub mod bands;
 mod error;
 mod init;
 mod prepared;

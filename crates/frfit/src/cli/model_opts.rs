@@ -5,9 +5,11 @@ use super::common::Band;
 use additive_riv::{DelayChoice, Hold, IvMethod, ModeSelection};
 use clap::{Args as ClapArgs, ValueEnum};
 use frf_data::{ProgressSink, Weighting};
+use frfit::chain::SkBands;
 use frfit::pipeline::{FrfType, PipelineConfig};
 use frfit::FrfitError;
 use indicatif::{ProgressBar, ProgressStyle};
+use sk_fit::bands::BandSpec;
 use std::time::Duration;
 
 /// `--hold zoh:FS | sinc:FS | none` (`none` overrides a hold the file declares).
@@ -33,6 +35,29 @@ pub fn parse_hold(s: &str) -> Result<Hold, String> {
             "unknown hold `{k}`: use zoh:FS_HZ (exact) or sinc:FS_HZ"
         )),
     }
+}
+
+/// `--bands auto | 1 | F1,F2,...` (cut-offs in Hz).
+pub fn parse_bands(s: &str) -> Result<BandSpec, String> {
+    BandSpec::parse(s).map_err(|e| e.to_string())
+}
+
+/// `--band-weights QL,QH`, both in `[0, 1]`.
+pub fn parse_band_weights(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or_else(|| format!("expected QL,QH (e.g. 0.1,1e-4), got `{s}`"))?;
+    let q = |name: &str, v: &str| -> Result<f64, String> {
+        let x: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| format!("{name} `{}` in `{s}` is not a number", v.trim()))?;
+        if !(0.0..=1.0).contains(&x) {
+            return Err(format!("{name} {x} in `{s}` must lie in [0, 1]"));
+        }
+        Ok(x)
+    };
+    Ok((q("QL", a)?, q("QH", b)?))
 }
 
 /// `--delay auto | none | SECONDS` (also `150us`, `0.2ms`).
@@ -155,6 +180,16 @@ pub struct FitOptions {
     /// subspace); default: chosen from the data.
     #[arg(long, value_name = "N")]
     pub order: Option<usize>,
+    /// Bayard's multi-band composite fit of the SK initialiser (Jue 2.3; needs
+    /// `--init sk`): `auto` (cut-offs in flat, low valleys of the CMIF between resonance
+    /// clusters), `1` (one band), or cut-off frequencies in Hz (`4.6,37`; a single
+    /// cut-off at 1 Hz is written `1.0`).
+    #[arg(long, value_parser = parse_bands, value_name = "auto|1|F1,F2,..")]
+    pub bands: Option<BandSpec>,
+    /// Tiered weights of the multi-band fit, `QL,QH`: the weight of the lines below and
+    /// above the band being fitted (Jue eq. 3). Default: `0.1,1e-4`.
+    #[arg(long, value_parser = parse_band_weights, value_name = "QL,QH", requires = "bands")]
+    pub band_weights: Option<(f64, f64)>,
     /// Weighting of the criterion.
     #[arg(long, value_enum, default_value_t = WeightingArg::Auto)]
     pub weighting: WeightingArg,
@@ -186,6 +221,15 @@ impl FitOptions {
             init: self.init.clone(),
             refine: self.refine.clone(),
             order: self.order,
+            sk_bands: self.bands.clone().map(|spec| {
+                let d = SkBands::default();
+                let (q_low, q_high) = self.band_weights.unwrap_or((d.q_low, d.q_high));
+                SkBands {
+                    spec,
+                    q_low,
+                    q_high,
+                }
+            }),
             frf_type: match self.frf_type {
                 FrfTypeArg::Displacement => FrfType::Displacement,
                 FrfTypeArg::Velocity => FrfType::Velocity,

@@ -81,6 +81,7 @@ pub fn chain_fit(
         // the plain CMIF start: with the completion the loop's steps change on the
         // reference files (a spurious second input_dynamics step on the input-lag case)
         complete_start: None,
+        sk_bands: cfg.sk_bands.clone(),
     };
     let (init, refine) = super::default_chain(
         &cfg.init,

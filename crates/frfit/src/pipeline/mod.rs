@@ -116,6 +116,9 @@ pub struct PipelineConfig {
     /// Model order (number of states) for initialisers that take one (SK, subspace);
     /// `None` lets them choose it from the data. Default: `None`.
     pub order: Option<usize>,
+    /// Bayard's multi-band composite fit for the `sk` initialiser (`--bands`); `None`:
+    /// one SK fit. Default: `None`.
+    pub sk_bands: Option<crate::chain::SkBands>,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -139,6 +142,7 @@ impl Default for PipelineConfig {
             init: "cmif".into(),
             refine: "riv".into(),
             order: None,
+            sk_bands: None,
             progress: ProgressSink::none(),
         }
     }
