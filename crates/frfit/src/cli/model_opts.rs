@@ -10,6 +10,7 @@ use frfit::pipeline::{FrfType, PipelineConfig};
 use frfit::FrfitError;
 use indicatif::{ProgressBar, ProgressStyle};
 use sk_fit::bands::BandSpec;
+use std::sync::Mutex;
 use std::time::Duration;
 
 /// `--hold zoh:FS | sinc:FS | none` (`none` overrides a hold the file declares).
@@ -240,26 +241,58 @@ impl FitOptions {
     }
 }
 
-/// A spinner with the stage and cost, on stderr; silent with `--quiet` or when stderr is
-/// not a terminal.
+/// A spinner for a stage of unknown length.
+fn spinner_style() -> ProgressStyle {
+    ProgressStyle::with_template("{spinner} [{elapsed_precise}] {prefix} {msg}")
+        .unwrap_or_else(|_| ProgressStyle::default_spinner())
+}
+
+/// A bar for a stage that reports its length. The lengths the estimators report are
+/// upper bounds (the ML iteration cap, the SK sweep's last order; the subspace steps
+/// are exact), so the remaining time is one too: iterations that converge end sooner.
+fn bar_style() -> ProgressStyle {
+    ProgressStyle::with_template(
+        "{spinner} [{elapsed_precise}] {prefix} [{bar:24}] {pos}/{len}, at most {eta} left {msg}",
+    )
+    .unwrap_or_else(|_| ProgressStyle::default_bar())
+}
+
+/// Progress on stderr, silent with `--quiet` or when stderr is not a terminal: a bar
+/// with the remaining time for a stage that reports its length (each stage starts its
+/// own bar, so the estimate is that stage's rate), a spinner for one that does not;
+/// the stage's message and cost beside it.
 pub fn progress(quiet: bool) -> (ProgressSink, Option<ProgressBar>) {
     if quiet {
         return (ProgressSink::none(), None);
     }
     let bar = ProgressBar::new_spinner();
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
-    );
+    bar.set_style(spinner_style());
     bar.enable_steady_tick(Duration::from_millis(120));
     let b = bar.clone();
+    let current: Mutex<Option<(String, Option<usize>)>> = Mutex::new(None);
     let sink = ProgressSink::new(move |p| {
+        let mut cur = current.lock().unwrap_or_else(|e| e.into_inner());
+        let key = (p.stage.clone(), p.total);
+        if cur.as_ref() != Some(&key) {
+            b.reset();
+            match p.total {
+                Some(t) => {
+                    b.set_style(bar_style());
+                    b.set_length(t as u64);
+                }
+                None => {
+                    b.unset_length();
+                    b.set_style(spinner_style());
+                }
+            }
+            b.set_prefix(p.stage.clone());
+            *cur = Some(key);
+        }
+        if p.total.is_some() {
+            b.set_position(p.step as u64);
+        }
         let cost = p.cost.map(|c| format!(" cost {c:.4e}")).unwrap_or_default();
-        let total = p.total.map(|t| format!("/{t}")).unwrap_or_default();
-        b.set_message(format!(
-            "{} {}{}{}: {}",
-            p.stage, p.step, total, cost, p.message
-        ));
+        b.set_message(format!("{}{}", p.message, cost));
     });
     (sink, Some(bar))
 }
