@@ -6,13 +6,16 @@
 //! the partial fractions `1 / (s - p_i)` and a constant, so the numerator fit "given the
 //! denominator" (Jue, eq. 2 with `d` fixed) and the residue fit are the same linear
 //! least-squares problem; the residue form is what the currency needs and is fitted in
-//! it directly (per entry, real and imaginary parts stacked, by QR). For
+//! it directly (per entry, real and imaginary parts stacked, by QR; entries whose
+//! weights are proportional share one QR, [`frf_data::proportional_groups`], and the
+//! groups are solved in parallel). For
 //! [`Hold::Zoh`] each partial fraction is replaced by its exact zero-order-hold image
 //! ([`ModalModel::zoh_response`]), so the residues are those of the continuous plant.
 
 use crate::{Prepared, SkError};
 use faer::linalg::solvers::SolveLstsq;
 use faer::Mat;
+use rayon::prelude::*;
 use realize::{Hold, ModalModel, PolePair, RealPole, C64};
 
 /// Poles of the continuous-time model, sorted.
@@ -120,47 +123,60 @@ pub fn fit_residues(
             "a partial fraction is not finite on the lines (a pole on the measured axis)",
         ));
     }
+    // entries whose weights are proportional share their regressor up to a scale that
+    // does not change the solution: one QR per group, the groups in parallel
+    let groups = frf_data::proportional_groups(&data.w, m, 1e-12);
+    let solved: Vec<(Vec<(usize, Vec<f64>)>, f64)> = groups
+        .par_iter()
+        .map(|grp| {
+            let ne = grp.entries.len();
+            let mut a = Mat::<f64>::zeros(2 * l, p);
+            let mut b = Mat::<f64>::zeros(2 * l, ne);
+            for k in 0..l {
+                let q = grp.line_weights[k].sqrt();
+                for (j, c) in cols.iter().enumerate() {
+                    a[(k, j)] = q * c[k].re;
+                    a[(l + k, j)] = q * c[k].im;
+                }
+                for (i, &e) in grp.entries.iter().enumerate() {
+                    let g = data.g[k * m + e] * q;
+                    b[(k, i)] = g.re;
+                    b[(l + k, i)] = g.im;
+                }
+            }
+            // column scaling keeps the QR well scaled whatever the residue sizes
+            let scale: Vec<f64> = (0..p)
+                .map(|j| {
+                    let n = a.col(j).norm_l2();
+                    if n > 0.0 {
+                        1.0 / n
+                    } else {
+                        1.0
+                    }
+                })
+                .collect();
+            for (j, &sc) in scale.iter().enumerate() {
+                a.col_mut(j).iter_mut().for_each(|v| *v *= sc);
+            }
+            let x = a.qr().solve_lstsq(&b);
+            // the residual with the scaled columns and their solution x, in the weights
+            // of the entries (the group's line weights times the entry's scale)
+            let r = &b - &a * &x;
+            let mut cost = 0.0;
+            let mut out = Vec::with_capacity(ne);
+            for (i, &e) in grp.entries.iter().enumerate() {
+                cost += grp.scales[i] * r.col(i).squared_norm_l2();
+                out.push((e, (0..p).map(|j| x[(j, i)] * scale[j]).collect()));
+            }
+            (out, cost)
+        })
+        .collect();
     let mut coef = vec![vec![0.0; p]; m];
     let mut cost = 0.0;
-    let mut a = Mat::<f64>::zeros(2 * l, p);
-    let mut b = Mat::<f64>::zeros(2 * l, 1);
-    for e in 0..m {
-        for k in 0..l {
-            let q = data.w[k * m + e].sqrt();
-            for (j, c) in cols.iter().enumerate() {
-                a[(k, j)] = q * c[k].re;
-                a[(l + k, j)] = q * c[k].im;
-            }
-            let g = data.g[k * m + e] * q;
-            b[(k, 0)] = g.re;
-            b[(l + k, 0)] = g.im;
-        }
-        // column scaling keeps the QR well scaled whatever the residue sizes
-        let scale: Vec<f64> = (0..p)
-            .map(|j| {
-                let n = a.col(j).norm_l2();
-                if n > 0.0 {
-                    1.0 / n
-                } else {
-                    1.0
-                }
-            })
-            .collect();
-        for j in 0..p {
-            let s = scale[j];
-            a.col_mut(j).iter_mut().for_each(|v| *v *= s);
-        }
-        let x = a.qr().solve_lstsq(&b);
-        for j in 0..p {
-            coef[e][j] = x[(j, 0)] * scale[j];
-        }
-        // residual with the scaled columns and unscaled solution x
-        for r in 0..2 * l {
-            let mut v = b[(r, 0)];
-            for j in 0..p {
-                v -= a[(r, j)] * x[(j, 0)];
-            }
-            cost += v * v;
+    for (out, c) in solved {
+        cost += c;
+        for (e, x) in out {
+            coef[e] = x;
         }
     }
     if coef.iter().flatten().any(|c| !c.is_finite()) {
