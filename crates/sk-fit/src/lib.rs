@@ -29,4 +29,4 @@ pub use error::SkError;
 pub use init::{BasisChoice, OrderScore, SkConfig, SkInit, SkReport};
 pub use prepared::Prepared;
 pub use residues::{fit_residues, PoleSet};
-pub use sk::{sk_denominator, SkDenominator, SkIterConfig, SkWeight};
+pub use sk::{sk_denominator, sk_denominator_from, SkDenominator, SkIterConfig, SkWeight};
