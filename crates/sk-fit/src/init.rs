@@ -62,7 +62,7 @@ pub struct SkConfig {
     /// SK iterations of each order of the sweep, at most (after the Levy start at the
     /// first order; every later order starts from the denominator of the order fitted
     /// before it). The chosen order is then fitted on all lines with `iter.max_iter`,
-    /// starting from its sweep denominator. Default: 3.
+    /// starting from its sweep denominator. Default: 2.
     pub sweep_max_iter: usize,
     /// The sweep runs on every `k`-th line, `k = ceil(L / sweep_lines)` (a coarse-to-fine
     /// order choice: the F test on the subset, the chosen order then fitted on all `L`
@@ -127,7 +127,7 @@ impl Default for SkConfig {
             order_alpha: 1e-3,
             patience: 3,
             exact_rel_cost: 1e-16,
-            sweep_max_iter: 3,
+            sweep_max_iter: 2,
             sweep_lines: 1000,
             basis: BasisChoice::Auto,
             iter: SkIterConfig::default(),

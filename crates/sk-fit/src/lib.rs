@@ -21,6 +21,7 @@
 mod error;
 mod init;
 mod prepared;
+mod qr;
 mod residues;
 mod sk;
 pub mod stats;

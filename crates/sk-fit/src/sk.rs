@@ -113,35 +113,44 @@ pub struct SkDenominator {
 
 /// The `R_22` block of the QR factorisation of entry `e`'s `[A_N | A_D]`: its
 /// denominator columns projected onto the orthogonal complement of its numerator
-/// columns (`None` when every weight of the entry is zero).
-fn reduced_block(data: &Prepared, ob: &Orthogonal, skw: &[f64], e: usize) -> Option<Mat<f64>> {
+/// columns (`None` when every weight of the entry is zero). `cols[j][k]` is the basis
+/// polynomial `q_j` at line `k` (column after column: the block is filled column by
+/// column, contiguously).
+fn reduced_block(data: &Prepared, cols: &[Vec<C64>], skw: &[f64], e: usize) -> Option<Mat<f64>> {
     let l = data.n_lines();
     let m = data.m();
-    let nc = ob.degree + 1;
-    let mut block = Mat::<f64>::zeros(2 * l, 2 * nc);
-    let mut any = false;
-    for k in 0..l {
-        let idx = k * m + e;
-        let q = data.w[idx].sqrt() * skw[k];
-        let g = data.g[idx] * q;
-        any |= q > 0.0;
-        for (j, p) in ob.row(k).iter().enumerate() {
-            let a = p * q;
-            block[(k, j)] = a.re;
-            block[(l + k, j)] = a.im;
-            let b = -(p * g);
-            block[(k, nc + j)] = b.re;
-            block[(l + k, nc + j)] = b.im;
-        }
-    }
-    if !any {
+    let nc = cols.len();
+    let q: Vec<f64> = (0..l).map(|k| data.w[k * m + e].sqrt() * skw[k]).collect();
+    if !q.iter().any(|&v| v > 0.0) {
         return None;
     }
-    let qr = block.qr();
-    let r = qr.thin_R();
+    let g: Vec<C64> = (0..l).map(|k| data.g[k * m + e] * q[k]).collect();
+    let mut block = Mat::<f64>::zeros(2 * l, 2 * nc);
+    for (j, p) in cols.iter().enumerate() {
+        let col = block.col_mut(j).try_as_col_major_mut().expect("contiguous");
+        let col = col.as_slice_mut();
+        let (re, im) = col.split_at_mut(l);
+        for k in 0..l {
+            let a = p[k] * q[k];
+            re[k] = a.re;
+            im[k] = a.im;
+        }
+        let col = block
+            .col_mut(nc + j)
+            .try_as_col_major_mut()
+            .expect("contiguous");
+        let col = col.as_slice_mut();
+        let (re, im) = col.split_at_mut(l);
+        for k in 0..l {
+            let b = -(p[k] * g[k]);
+            re[k] = b.re;
+            im[k] = b.im;
+        }
+    }
+    crate::qr::r_in_place(block.as_mut());
     Some(Mat::from_fn(nc, nc, |i, j| {
         if j >= i {
-            r[(nc + i, nc + j)]
+            block[(nc + i, nc + j)]
         } else {
             0.0
         }
@@ -237,9 +246,12 @@ pub fn sk_denominator_from(
         // the basis orthonormal in the weight of this iteration's denominator columns
         let bw: Vec<f64> = (0..l).map(|k| gw[k] * skw[k] * skw[k]).collect();
         let ob = Orthogonal::new(&x, &bw, n)?;
+        let cols: Vec<Vec<C64>> = (0..nc)
+            .map(|j| (0..l).map(|k| ob.row(k)[j]).collect())
+            .collect();
         let blocks: Vec<Option<Mat<f64>>> = (0..m)
             .into_par_iter()
-            .map(|e| reduced_block(data, &ob, &skw, e))
+            .map(|e| reduced_block(data, &cols, &skw, e))
             .collect();
         let mut used = 0;
         for r22 in blocks.into_iter().flatten() {
