@@ -68,10 +68,11 @@ pub struct SkConfig {
     /// order choice: the F test on the subset, the chosen order then fitted on all `L`
     /// lines); 0 sweeps on all lines. A rational model is determined by its values on
     /// any lines, so the subset keeps every mode of the band; a mode narrower than the
-    /// subset's spacing is seen on fewer lines and the F test then has less power for
-    /// it. Measured on the wafer stage: 3960 lines, 990 in the sweep (2 Hz apart, the
-    /// sharpest mode 1.3 Hz wide at half power), the same order 36 chosen as on all
-    /// lines. Default: 1000.
+    /// subset's spacing is seen on fewer lines (a line half a spacing from its peak still
+    /// sees a third of it when the spacing is 2.7 half-power bandwidths) and the F test
+    /// then has less power for it. Measured on the wafer stage: 3960 lines, 566 in the
+    /// sweep (3.5 Hz apart, the sharpest mode 1.3 Hz wide at half power), the same
+    /// order 36 chosen as on all lines and the same final fit. Default: 600.
     pub sweep_lines: usize,
     /// The basis. Default: [`BasisChoice::Auto`].
     pub basis: BasisChoice,
@@ -128,7 +129,7 @@ impl Default for SkConfig {
             patience: 3,
             exact_rel_cost: 1e-16,
             sweep_max_iter: 2,
-            sweep_lines: 1000,
+            sweep_lines: 600,
             basis: BasisChoice::Auto,
             iter: SkIterConfig::default(),
             hold: Hold::None,
