@@ -186,7 +186,9 @@ pub struct SkReport {
     /// exceeds `chi2_dp(alpha) / dp` (`dp` added parameters: one per pole and one per
     /// entry and pole; `N` real residuals); the sweep runs upwards in steps of 2 from
     /// the start (see [`SkConfig::start_from_peaks`]) and stops after `patience` orders
-    /// that do not, or at an exact fit.
+    /// that do not, or at an exact fit. The sweep runs on [`SkReport::sweep_lines`]
+    /// lines; each order after the first starts from the denominator of the order
+    /// before it.
     pub sweep: Vec<OrderScore>,
     /// SK iterations after the Levy start.
     pub iterations: usize,

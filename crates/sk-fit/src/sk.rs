@@ -29,7 +29,11 @@
 //! columns, reduced to `n + 1` rows. The `R_22` blocks of all entries are stacked and
 //! the denominator is the right singular vector of the smallest singular value (the
 //! normalisation `||d|| = 1`). The cost of one iteration is linear in the entries and
-//! the lines: `m` QRs of `2 L x 2 (n + 1)` and one SVD of `m (n + 1) x (n + 1)`.
+//! the lines: `m` QRs of `2 L x 2 (n + 1)` (in parallel over the entries, each
+//! sequential) and one SVD of `m (n + 1) x (n + 1)`. With per-entry weights (a measured
+//! variance per entry) the numerator columns differ from entry to entry and nothing is
+//! shared; the iterations are what can be saved: [`sk_denominator_from`] starts from a
+//! previous denominator (another order, or the same order on a subset of the lines).
 
 use crate::{Prepared, SkError};
 use faer::Mat;
