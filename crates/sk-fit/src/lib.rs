@@ -9,6 +9,7 @@
 //! - [`sk_denominator`]: Levy start, then SK weights `1/|d|` (classic) or `1/sqrt|d|`
 //!   (Jue's default) times the data weight; per-entry numerators eliminated by a QR per
 //!   entry (cost linear in entries and lines); real coefficients;
+//!   [`sk_denominator_from`] starts from a previous denominator instead of Levy's;
 //! - [`fit_residues`]: with the poles fixed, residue matrices, integrators and
 //!   feedthrough by linear least squares (continuous or through the exact hold);
 //! - [`SkInit`]: the initialiser of the estimator chain (`frfit fit --init sk`): known
@@ -25,6 +26,7 @@ pub mod bands;
 mod error;
 mod init;
 mod prepared;
+mod qr;
 mod residues;
 mod sk;
 pub mod stats;
@@ -33,4 +35,4 @@ pub use error::SkError;
 pub use init::{BasisChoice, OrderScore, SkConfig, SkInit, SkReport};
 pub use prepared::Prepared;
 pub use residues::{fit_residues, PoleSet};
-pub use sk::{sk_denominator, SkDenominator, SkIterConfig, SkWeight};
+pub use sk::{sk_denominator, sk_denominator_from, SkDenominator, SkIterConfig, SkWeight};

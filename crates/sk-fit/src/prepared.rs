@@ -94,6 +94,27 @@ impl Prepared {
             .sum()
     }
 
+    /// Every `step`-th line (the first, then every `step`-th after it): the same data on
+    /// a coarser grid (`step` 0 or 1: all lines).
+    pub fn every(&self, step: usize) -> Prepared {
+        let step = step.max(1);
+        let m = self.m();
+        let keep: Vec<usize> = (0..self.n_lines()).step_by(step).collect();
+        Prepared {
+            omegas: keep.iter().map(|&k| self.omegas[k]).collect(),
+            ny: self.ny,
+            nu: self.nu,
+            g: keep
+                .iter()
+                .flat_map(|&k| self.g[k * m..(k + 1) * m].iter().copied())
+                .collect(),
+            w: keep
+                .iter()
+                .flat_map(|&k| self.w[k * m..(k + 1) * m].iter().copied())
+                .collect(),
+        }
+    }
+
     /// The band, rad/s.
     pub fn band(&self) -> (f64, f64) {
         let lo = self.omegas.iter().copied().fold(f64::INFINITY, f64::min);

@@ -6,13 +6,16 @@
 //! the partial fractions `1 / (s - p_i)` and a constant, so the numerator fit "given the
 //! denominator" (Jue, eq. 2 with `d` fixed) and the residue fit are the same linear
 //! least-squares problem; the residue form is what the currency needs and is fitted in
-//! it directly (per entry, real and imaginary parts stacked, by QR). For
+//! it directly (per entry, real and imaginary parts stacked, by QR; entries whose
+//! weights are proportional share one QR, [`frf_data::proportional_groups`], and the
+//! groups are solved in parallel). For
 //! [`Hold::Zoh`] each partial fraction is replaced by its exact zero-order-hold image
 //! ([`ModalModel::zoh_response`]), so the residues are those of the continuous plant.
 
 use crate::{Prepared, SkError};
-use faer::linalg::solvers::SolveLstsq;
-use faer::Mat;
+use faer::linalg::triangular_solve::solve_upper_triangular_in_place;
+use faer::{Mat, Par};
+use rayon::prelude::*;
 use realize::{Hold, ModalModel, PolePair, RealPole, C64};
 
 /// Poles of the continuous-time model, sorted.
@@ -87,6 +90,9 @@ fn regressors(
     Ok(cols)
 }
 
+/// One group's fit: the coefficients of each of its entries, and its weighted cost.
+type GroupFit = (Vec<(usize, Vec<f64>)>, f64);
+
 /// The residue matrices (and the feedthrough when `feedthrough`) of the model with the
 /// given `poles` that fits `data` best in the weighted least-squares sense, and its
 /// weighted cost `sum w |G - P|^2`.
@@ -120,47 +126,68 @@ pub fn fit_residues(
             "a partial fraction is not finite on the lines (a pole on the measured axis)",
         ));
     }
+    // entries whose weights are proportional share their regressor up to a scale that
+    // does not change the solution: one QR per group, the groups in parallel
+    let groups = frf_data::proportional_groups(&data.w, m, 1e-12);
+    let solved: Vec<GroupFit> = groups
+        .par_iter()
+        .map(|grp| {
+            let ne = grp.entries.len();
+            // [A | B]: the regressors, then the entries' data; the QR of the whole gives
+            // the solutions (R_11 x = R_12) and the residual norms (the part of each
+            // data column below row p of R) in one factorisation
+            let mut a = Mat::<f64>::zeros(2 * l, p + ne);
+            let q: Vec<f64> = grp.line_weights.iter().map(|w| w.sqrt()).collect();
+            for (j, c) in cols.iter().enumerate() {
+                for k in 0..l {
+                    a[(k, j)] = q[k] * c[k].re;
+                    a[(l + k, j)] = q[k] * c[k].im;
+                }
+            }
+            for (i, &e) in grp.entries.iter().enumerate() {
+                for k in 0..l {
+                    let g = data.g[k * m + e] * q[k];
+                    a[(k, p + i)] = g.re;
+                    a[(l + k, p + i)] = g.im;
+                }
+            }
+            // column scaling keeps the QR well scaled whatever the residue sizes
+            let scale: Vec<f64> = (0..p)
+                .map(|j| {
+                    let n = a.col(j).norm_l2();
+                    if n > 0.0 {
+                        1.0 / n
+                    } else {
+                        1.0
+                    }
+                })
+                .collect();
+            for (j, &sc) in scale.iter().enumerate() {
+                a.col_mut(j).iter_mut().for_each(|v| *v *= sc);
+            }
+            crate::qr::r_in_place(a.as_mut());
+            let r11 = Mat::<f64>::from_fn(p, p, |i, j| if j >= i { a[(i, j)] } else { 0.0 });
+            let mut x = Mat::<f64>::from_fn(p, ne, |i, j| a[(i, p + j)]);
+            solve_upper_triangular_in_place(r11.as_ref(), x.as_mut(), Par::Seq);
+            // the weighted residual of entry i: rows p..p+i of its column of R, in the
+            // weights of the entry (the group's line weights times the entry's scale)
+            let mut cost = 0.0;
+            let mut out = Vec::with_capacity(ne);
+            for (i, &e) in grp.entries.iter().enumerate() {
+                let rows = p..(p + i + 1).min(2 * l);
+                let res2: f64 = rows.map(|r| a[(r, p + i)] * a[(r, p + i)]).sum();
+                cost += grp.scales[i] * res2;
+                out.push((e, (0..p).map(|j| x[(j, i)] * scale[j]).collect()));
+            }
+            (out, cost)
+        })
+        .collect();
     let mut coef = vec![vec![0.0; p]; m];
     let mut cost = 0.0;
-    let mut a = Mat::<f64>::zeros(2 * l, p);
-    let mut b = Mat::<f64>::zeros(2 * l, 1);
-    for e in 0..m {
-        for k in 0..l {
-            let q = data.w[k * m + e].sqrt();
-            for (j, c) in cols.iter().enumerate() {
-                a[(k, j)] = q * c[k].re;
-                a[(l + k, j)] = q * c[k].im;
-            }
-            let g = data.g[k * m + e] * q;
-            b[(k, 0)] = g.re;
-            b[(l + k, 0)] = g.im;
-        }
-        // column scaling keeps the QR well scaled whatever the residue sizes
-        let scale: Vec<f64> = (0..p)
-            .map(|j| {
-                let n = a.col(j).norm_l2();
-                if n > 0.0 {
-                    1.0 / n
-                } else {
-                    1.0
-                }
-            })
-            .collect();
-        for j in 0..p {
-            let s = scale[j];
-            a.col_mut(j).iter_mut().for_each(|v| *v *= s);
-        }
-        let x = a.qr().solve_lstsq(&b);
-        for j in 0..p {
-            coef[e][j] = x[(j, 0)] * scale[j];
-        }
-        // residual with the scaled columns and unscaled solution x
-        for r in 0..2 * l {
-            let mut v = b[(r, 0)];
-            for j in 0..p {
-                v -= a[(r, j)] * x[(j, 0)];
-            }
-            cost += v * v;
+    for (out, c) in solved {
+        cost += c;
+        for (e, x) in out {
+            coef[e] = x;
         }
     }
     if coef.iter().flatten().any(|c| !c.is_finite()) {

@@ -29,7 +29,11 @@
 //! columns, reduced to `n + 1` rows. The `R_22` blocks of all entries are stacked and
 //! the denominator is the right singular vector of the smallest singular value (the
 //! normalisation `||d|| = 1`). The cost of one iteration is linear in the entries and
-//! the lines: `m` QRs of `2 L x 2 (n + 1)` and one SVD of `m (n + 1) x (n + 1)`.
+//! the lines: `m` QRs of `2 L x 2 (n + 1)` (in parallel over the entries, each
+//! sequential) and one SVD of `m (n + 1) x (n + 1)`. With per-entry weights (a measured
+//! variance per entry) the numerator columns differ from entry to entry and nothing is
+//! shared; the iterations are what can be saved: [`sk_denominator_from`] starts from a
+//! previous denominator (another order, or the same order on a subset of the lines).
 
 use crate::{Prepared, SkError};
 use faer::Mat;
@@ -113,35 +117,44 @@ pub struct SkDenominator {
 
 /// The `R_22` block of the QR factorisation of entry `e`'s `[A_N | A_D]`: its
 /// denominator columns projected onto the orthogonal complement of its numerator
-/// columns (`None` when every weight of the entry is zero).
-fn reduced_block(data: &Prepared, ob: &Orthogonal, skw: &[f64], e: usize) -> Option<Mat<f64>> {
+/// columns (`None` when every weight of the entry is zero). `cols[j][k]` is the basis
+/// polynomial `q_j` at line `k` (column after column: the block is filled column by
+/// column, contiguously).
+fn reduced_block(data: &Prepared, cols: &[Vec<C64>], skw: &[f64], e: usize) -> Option<Mat<f64>> {
     let l = data.n_lines();
     let m = data.m();
-    let nc = ob.degree + 1;
-    let mut block = Mat::<f64>::zeros(2 * l, 2 * nc);
-    let mut any = false;
-    for k in 0..l {
-        let idx = k * m + e;
-        let q = data.w[idx].sqrt() * skw[k];
-        let g = data.g[idx] * q;
-        any |= q > 0.0;
-        for (j, p) in ob.row(k).iter().enumerate() {
-            let a = p * q;
-            block[(k, j)] = a.re;
-            block[(l + k, j)] = a.im;
-            let b = -(p * g);
-            block[(k, nc + j)] = b.re;
-            block[(l + k, nc + j)] = b.im;
-        }
-    }
-    if !any {
+    let nc = cols.len();
+    let q: Vec<f64> = (0..l).map(|k| data.w[k * m + e].sqrt() * skw[k]).collect();
+    if !q.iter().any(|&v| v > 0.0) {
         return None;
     }
-    let qr = block.qr();
-    let r = qr.thin_R();
+    let g: Vec<C64> = (0..l).map(|k| data.g[k * m + e] * q[k]).collect();
+    let mut block = Mat::<f64>::zeros(2 * l, 2 * nc);
+    for (j, p) in cols.iter().enumerate() {
+        let col = block.col_mut(j).try_as_col_major_mut().expect("contiguous");
+        let col = col.as_slice_mut();
+        let (re, im) = col.split_at_mut(l);
+        for k in 0..l {
+            let a = p[k] * q[k];
+            re[k] = a.re;
+            im[k] = a.im;
+        }
+        let col = block
+            .col_mut(nc + j)
+            .try_as_col_major_mut()
+            .expect("contiguous");
+        let col = col.as_slice_mut();
+        let (re, im) = col.split_at_mut(l);
+        for k in 0..l {
+            let b = -(p[k] * g[k]);
+            re[k] = b.re;
+            im[k] = b.im;
+        }
+    }
+    crate::qr::r_in_place(block.as_mut());
     Some(Mat::from_fn(nc, nc, |i, j| {
         if j >= i {
-            r[(nc + i, nc + j)]
+            block[(nc + i, nc + j)]
         } else {
             0.0
         }
@@ -149,12 +162,30 @@ fn reduced_block(data: &Prepared, ob: &Orthogonal, skw: &[f64], e: usize) -> Opt
 }
 
 /// SK iterations for the order-`n` common denominator of `data` in `basis` (see the
-/// module documentation).
+/// module documentation), from Levy's start.
 pub fn sk_denominator(
     data: &Prepared,
     basis: &Basis,
     n: usize,
     cfg: &SkIterConfig,
+) -> Result<SkDenominator, SkError> {
+    sk_denominator_from(data, basis, n, cfg, None)
+}
+
+/// [`sk_denominator`] warm-started: the first iteration is weighted by a previous
+/// denominator given by its roots `start` in the basis variable (`|d_0(x_k)| =
+/// prod_i |x_k - r_i|`, up to a scale that the weights do not see) instead of Levy's
+/// `d_0 = 1`. The SK iteration (Jue eq. (4)) only needs `d_(i-1)` on the lines, so a
+/// denominator of another order (the previous order of a sweep) or fitted on other
+/// lines (a subset) is a valid start; from a good start the iterations converge in a
+/// few steps instead of climbing out of Levy's bias towards the lightly damped peaks.
+/// `None` (or no roots) is Levy's start.
+pub fn sk_denominator_from(
+    data: &Prepared,
+    basis: &Basis,
+    n: usize,
+    cfg: &SkIterConfig,
+    start: Option<&[C64]>,
 ) -> Result<SkDenominator, SkError> {
     let l = data.n_lines();
     let m = data.m();
@@ -187,6 +218,25 @@ pub fn sk_denominator(
     let gamma = cfg.weight.exponent();
     // |d_prev(x_k)|^-gamma, 1 for the Levy start
     let mut skw = vec![1.0; l];
+    if let Some(roots) = start.filter(|r| !r.is_empty()) {
+        // -gamma log |d_0(x_k)| (the product of up to 80 factors is summed in logs),
+        // then scaled to a largest weight of 1 (only relative weights matter)
+        let logw: Vec<f64> = x
+            .iter()
+            .map(|xk| -gamma * roots.iter().map(|r| (xk - r).norm().ln()).sum::<f64>())
+            .collect();
+        if logw.iter().any(|v| !v.is_finite()) {
+            return Err(SkError::numerical(
+                "SK warm start",
+                "the start denominator vanishes on a line (a root on the measured axis) or \
+                 has a root that is not finite",
+            ));
+        }
+        let top = logw.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        for (w, v) in skw.iter_mut().zip(&logw) {
+            *w = (v - top).exp();
+        }
+    }
     let mut stacked = Mat::<f64>::zeros(m * nc, nc);
     let mut history = Vec::new();
     let mut den = vec![0.0; nc];
@@ -200,9 +250,12 @@ pub fn sk_denominator(
         // the basis orthonormal in the weight of this iteration's denominator columns
         let bw: Vec<f64> = (0..l).map(|k| gw[k] * skw[k] * skw[k]).collect();
         let ob = Orthogonal::new(&x, &bw, n)?;
+        let cols: Vec<Vec<C64>> = (0..nc)
+            .map(|j| (0..l).map(|k| ob.row(k)[j]).collect())
+            .collect();
         let blocks: Vec<Option<Mat<f64>>> = (0..m)
             .into_par_iter()
-            .map(|e| reduced_block(data, &ob, &skw, e))
+            .map(|e| reduced_block(data, &cols, &skw, e))
             .collect();
         let mut used = 0;
         for r22 in blocks.into_iter().flatten() {
