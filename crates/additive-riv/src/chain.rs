@@ -427,11 +427,33 @@ impl Estimator for RivRefine {
     }
 }
 
+/// Largest relative real part `||Re r|| / ||r||` (Frobenius) of a pole pair's residue
+/// that a constant numerator represents (see [`AdditiveModel::from_frf_model`]).
+pub const PROPORTIONAL_RESIDUE_TOL: f64 = 1e-2;
+
+/// True when the residue `r` of a pole pair is (within [`PROPORTIONAL_RESIDUE_TOL`])
+/// that of a constant real numerator `B_0 / (s^2 + 2 zeta w s + w^2)`, eq. (26):
+/// `r = B_0 / (2 j w_d)`, purely imaginary. A residue with a real part (a mode of a
+/// structure whose damping is not proportional, as a common-denominator or subspace
+/// fit of real data returns) needs the first-order numerator `B_0 + B_1 s`.
+fn is_proportional(r: &faer::Mat<frf_data::C64>) -> bool {
+    let (mut re, mut all) = (0.0, 0.0);
+    for j in 0..r.ncols() {
+        for i in 0..r.nrows() {
+            re += r[(i, j)].re * r[(i, j)].re;
+            all += r[(i, j)].norm_sqr();
+        }
+    }
+    re <= PROPORTIONAL_RESIDUE_TOL * PROPORTIONAL_RESIDUE_TOL * all
+}
+
 impl AdditiveModel {
     /// The additive structure of a currency model, for a refiner: the domain from its
     /// hold (the exact zero-order hold in the shift variable), its known factors, one
     /// rigid-body submodel with as many integrators as its rigid part has terms, one
-    /// mode (constant numerator, eq. 26) per pole pair, one first-order submodel per
+    /// mode per pole pair (constant numerator, eq. 26; in continuous time `B_0 + B_1 s`
+    /// when the pair's residue has a real part above [`PROPORTIONAL_RESIDUE_TOL`] of its
+    /// size, which a constant numerator cannot represent), one first-order submodel per
     /// real pole, a feedthrough when it has one and a crosstalk as a feedthrough that
     /// bypasses the delay. The numerators are left at zero: fit them with
     /// [`fit_numerators`] (eq. 24) on the data. `band_hz` sets the rigid body's frequency
@@ -465,14 +487,20 @@ impl AdditiveModel {
             Domain::ZohDiscrete { ts } => 0.5 / ts,
             Domain::Continuous => f64::INFINITY,
         };
-        let mut pairs: Vec<(f64, f64)> = fm
+        let mut pairs: Vec<(f64, f64, bool)> = fm
             .modal
             .pairs
             .iter()
-            .map(|p| (p.f_hz(), p.zeta()))
+            .map(|p| {
+                (
+                    p.f_hz(),
+                    p.zeta(),
+                    domain == Domain::Continuous && !is_proportional(&p.residue),
+                )
+            })
             .collect();
         pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (f_hz, zeta) in pairs {
+        for (f_hz, zeta, first_order) in pairs {
             if f_hz >= nyq {
                 notes.push(format!(
                     "start mode at {f_hz:.2} Hz is at or above the Nyquist frequency of the hold ({nyq:.1} Hz): left out"
@@ -487,7 +515,7 @@ impl AdditiveModel {
                 ));
                 zeta_unstable
             };
-            m.push_mode(f_hz, z, false)?;
+            m.push_mode(f_hz, z, first_order)?;
         }
         for rp in &fm.modal.real_poles {
             let p = if rp.pole < 0.0 {
@@ -596,5 +624,48 @@ impl AdditiveModel {
                 crosstalk,
             },
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::Mat;
+    use frf_data::{Frf, Weighting, C64};
+    use realize::{FrfModel, ModalModel, PolePair};
+    use std::f64::consts::TAU;
+
+    /// A 2 x 1 continuous model with two modes: one of proportional damping (residue
+    /// purely imaginary) and one whose residue has a real part (a non-proportional
+    /// structure). Its exact response goes through `from_frf_model` and the numerator
+    /// fit (eq. 24): the model is reproduced to rounding, the second mode with a
+    /// first-order numerator, the first with a constant one.
+    #[test]
+    fn a_complex_residue_gets_a_first_order_numerator() {
+        let mut m = ModalModel::new(2, 1);
+        let pole = |f: f64, z: f64| C64::new(-z * TAU * f, TAU * f * (1.0 - z * z).sqrt());
+        let imag = Mat::from_fn(2, 1, |i, _| C64::new(0.0, -(1.0 + i as f64) * 100.0));
+        let general = Mat::from_fn(2, 1, |i, _| C64::new(40.0 * (1.0 - 2.0 * i as f64), -150.0));
+        m.pairs.push(PolePair {
+            pole: pole(50.0, 0.02),
+            residue: imag,
+        });
+        m.pairs.push(PolePair {
+            pole: pole(180.0, 0.01),
+            residue: general,
+        });
+        let fm = FrfModel::new(m);
+        let f: Vec<f64> = (0..400).map(|k| 10.0 + 390.0 * k as f64 / 399.0).collect();
+        let w: Vec<f64> = f.iter().map(|x| TAU * x).collect();
+        let g = fm.freq_response(&w).unwrap();
+        let data = Frf::new(f, 2, 1, g.values.clone(), None).unwrap();
+        let (mut am, _) = AdditiveModel::from_frf_model(&fm, (10.0, 400.0), 0.01).unwrap();
+        let orders: Vec<usize> = am.submodels.iter().map(|s| s.num.len()).collect();
+        assert_eq!(orders, vec![1, 2]);
+        let fd = FitData::new(&data, &Weighting::Uniform).unwrap();
+        fit_numerators(&mut am, &fd).unwrap();
+        let back = am.to_frf_model().unwrap();
+        let (median, _) = back.relative_error(&w, &g).unwrap();
+        assert!(median < 1e-10, "median relative error {median:.3e}");
     }
 }

@@ -20,7 +20,9 @@
 //!   weights (section 2.3): bands given or chosen from the CMIF, each band an SK fit of
 //!   the data minus the other bands' models, the sum in the model currency.
 //!
-//! Not here (yet): Gilbert realization and balanced truncation.
+//! The state space of the result (Gilbert's realization: each residue at its numerical
+//! rank) and its balanced truncation are in `realize` (`ModalModel::to_state_space`,
+//! `realize::balanced`), for every initialiser's model alike.
 
 pub mod bands;
 mod error;
