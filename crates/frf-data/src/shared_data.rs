@@ -5,6 +5,7 @@
 //! print why they are skipped (see [`skip_message`]) and pass: the project's own
 //! simulator covers the same properties without files.
 
+use crate::FrfDataset;
 use std::path::{Path, PathBuf};
 
 /// The environment variable that overrides the location of the shared data directory.
@@ -54,4 +55,25 @@ pub fn require(test: &str, name: &str) -> Option<PathBuf> {
         println!("{}", skip_message(test, name));
     }
     p
+}
+
+/// The reference file `name` read and cut to `band_hz` (Hz), for the benches and tests
+/// that time or check a fit on it; prints why `who` is skipped and returns `None` when
+/// the file is not there, cannot be read, or holds no lines in the band.
+pub fn require_band(who: &str, name: &str, band_hz: (f64, f64)) -> Option<crate::Frf> {
+    let path = require(who, name)?;
+    let data = match crate::io::read_frf(&path) {
+        Ok(d) => d,
+        Err(e) => {
+            println!("SKIPPED {who}: cannot read {}: {e}", path.display());
+            return None;
+        }
+    };
+    match data.band(band_hz.0, band_hz.1) {
+        Ok(v) => Some(v.to_frf()),
+        Err(e) => {
+            println!("SKIPPED {who}: band {band_hz:?} Hz of {name}: {e}");
+            None
+        }
+    }
 }

@@ -13,7 +13,7 @@
 //! prints why and registers nothing.
 
 use criterion::{criterion_group, criterion_main, Criterion, SamplingMode};
-use frf_data::{shared_data, ChainModel, ChainSettings, DelayChoice, Estimator, Frf, FrfDataset};
+use frf_data::{shared_data, ChainModel, ChainSettings, DelayChoice, Estimator, Frf};
 use frfit::chain::{run_chain, AdditiveOptions};
 use ml_refine::{MlConfig, MlRefine};
 use realize::Hold;
@@ -27,31 +27,7 @@ const REALIZATIONS: usize = 10;
 
 /// The band of the reference data, or `None` (with a message) when it is unavailable.
 fn load_band() -> Option<Frf> {
-    let Some(path) = shared_data::shared_file(FILE) else {
-        println!(
-            "ml_wafer_stage skipped: ../shared/data not found (no `{FILE}` in ${} or \
-             ../shared/data beside the workspace)",
-            shared_data::ENV_VAR
-        );
-        return None;
-    };
-    let data = match frf_data::io::read_frf(&path) {
-        Ok(d) => d,
-        Err(e) => {
-            println!(
-                "ml_wafer_stage skipped: cannot read {}: {e}",
-                path.display()
-            );
-            return None;
-        }
-    };
-    match data.band(BAND_HZ.0, BAND_HZ.1) {
-        Ok(v) => Some(v.to_frf()),
-        Err(e) => {
-            println!("ml_wafer_stage skipped: band {BAND_HZ:?} Hz: {e}");
-            None
-        }
-    }
+    shared_data::require_band("ml_wafer_stage", FILE, BAND_HZ)
 }
 
 fn bench(c: &mut Criterion) {

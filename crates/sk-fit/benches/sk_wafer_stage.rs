@@ -28,31 +28,7 @@ const SAMPLES: usize = 10;
 
 /// The band of the reference data, or `None` (with a message) when it is unavailable.
 fn load_band() -> Option<Frf> {
-    let Some(path) = shared_data::shared_file(FILE) else {
-        println!(
-            "sk_wafer_stage skipped: ../shared/data not found (no `{FILE}` in ${} or \
-             ../shared/data beside the workspace)",
-            shared_data::ENV_VAR
-        );
-        return None;
-    };
-    let data = match frf_data::io::read_frf(&path) {
-        Ok(d) => d,
-        Err(e) => {
-            println!(
-                "sk_wafer_stage skipped: cannot read {}: {e}",
-                path.display()
-            );
-            return None;
-        }
-    };
-    match data.band(BAND_HZ.0, BAND_HZ.1) {
-        Ok(v) => Some(v.to_frf()),
-        Err(e) => {
-            println!("sk_wafer_stage skipped: band {BAND_HZ:?} Hz: {e}");
-            None
-        }
-    }
+    shared_data::require_band("sk_wafer_stage", FILE, BAND_HZ)
 }
 
 fn bench_wafer(c: &mut Criterion) {

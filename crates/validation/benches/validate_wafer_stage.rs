@@ -26,31 +26,7 @@ const MU_LINES: usize = 40;
 
 /// Reads one reference file cut to the band, or says why not.
 fn load(name: &str) -> Option<Frf> {
-    let Some(path) = shared_data::shared_file(name) else {
-        println!(
-            "validate_wafer_stage skipped: ../shared/data not found (no `{name}` in ${} or \
-             ../shared/data beside the workspace)",
-            shared_data::ENV_VAR
-        );
-        return None;
-    };
-    let data = match frf_data::io::read_frf(&path) {
-        Ok(d) => d,
-        Err(e) => {
-            println!(
-                "validate_wafer_stage skipped: cannot read {}: {e}",
-                path.display()
-            );
-            return None;
-        }
-    };
-    match data.band(BAND_HZ.0, BAND_HZ.1) {
-        Ok(v) => Some(v.to_frf()),
-        Err(e) => {
-            println!("validate_wafer_stage skipped: band {BAND_HZ:?} Hz: {e}");
-            None
-        }
-    }
+    shared_data::require_band("validate_wafer_stage", name, BAND_HZ)
 }
 
 /// The lines `idx` of `frf` (values and variance) as a new FRF.
