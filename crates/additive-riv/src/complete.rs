@@ -443,7 +443,8 @@ fn unresolved_spike(
 }
 
 /// Candidate new modes, the most likely first, as (frequency in Hz, damping estimate):
-/// CMIF peaks inside the band of two views of the residual `G - P`, taken alternately
+/// CMIF peaks inside the band of two views of the residual `G - P` (`resid`, of `model`
+/// on `data`), taken alternately
 /// (the strongest of each view first, then the second of each, ...; a peak within
 /// `cfg.min_separation` of one already listed is the same misfit):
 ///
@@ -466,14 +467,13 @@ fn unresolved_spike(
 /// picker measures its prominences against it.
 fn residual_candidates(
     model: &AdditiveModel,
+    resid: &[C64],
     data: &FitData,
     unit_variance: bool,
     cfg: &CompleteConfig,
 ) -> Vec<(f64, Option<f64>)> {
-    let mut resid = Vec::new();
-    model_cost(model, data, Some(&mut resid));
-    let weighted = view_candidates(&resid, data, true, unit_variance, cfg);
-    let mut plain = view_candidates(&resid, data, false, false, cfg);
+    let weighted = view_candidates(resid, data, true, unit_variance, cfg);
+    let mut plain = view_candidates(resid, data, false, false, cfg);
     // in the plain view a fitted mode's own coarse misfit peaks at its resonance, where
     // the data are largest; the split of a mode that is really two shows in the
     // weighted view
@@ -559,21 +559,20 @@ fn view_candidates(
 }
 
 /// Candidate new modes from the matched single-mode scan of the weighted residual
-/// ([`crate::mode_scan`]), as (frequency in Hz, damping): the `cfg.scan_trials` trial
+/// `resid` of `model` ([`crate::mode_scan`]), as (frequency in Hz, damping): the `cfg.scan_trials` trial
 /// poles that remove the most weighted residual energy, each farther than
 /// `cfg.min_separation` from the candidates `tried` already (the residual's peaks) and
 /// than two half-power half-widths from a fitted mode (there the scan sees the mode's
 /// own coarse misfit; the split of a mode that is really two is the peaks' case).
 fn scan_candidates(
     model: &AdditiveModel,
+    resid: &[C64],
     data: &FitData,
     tried: &[(f64, Option<f64>)],
     cfg: &CompleteConfig,
 ) -> Vec<(f64, Option<f64>)> {
-    let mut resid = Vec::new();
-    model_cost(model, data, Some(&mut resid));
     let modes = mode_list(model);
-    scan_residual(&resid, data, &cfg.scan, cfg.min_separation)
+    scan_residual(resid, data, &cfg.scan, cfg.min_separation)
         .into_iter()
         .filter(|h| {
             tried
@@ -674,7 +673,10 @@ pub fn complete_start(
     if add_modes {
         for round in 0..cfg.max_rounds {
             report.rounds = round + 1;
-            let mut cands = residual_candidates(&cur, data, unit_variance, cfg);
+            // the residual of the round's model serves the peaks and the scan
+            let mut resid = Vec::new();
+            model_cost(&cur, data, Some(&mut resid));
+            let mut cands = residual_candidates(&cur, &resid, data, unit_variance, cfg);
             cands.truncate(cfg.max_trials_per_round);
             // one candidate at a time, the strongest first: the first that lowers the
             // cost significantly is kept (a broad misfit has side peaks that a mode at
@@ -689,7 +691,7 @@ pub fn complete_start(
             loop {
                 if c == trials.len() && !scanned {
                     scanned = true;
-                    let more = scan_candidates(&cur, data, &cands, cfg);
+                    let more = scan_candidates(&cur, &resid, data, &cands, cfg);
                     cands.extend(more.iter().copied());
                     trials.extend(more.into_iter().map(|c| vec![c]));
                 }
