@@ -5,7 +5,7 @@
 
 use crate::residues::{fit_residues, PoleSet};
 use crate::sk::{sk_denominator_from, SkDenominator, SkIterConfig};
-use crate::stats::f_critical;
+use crate::stats::f_test;
 use crate::{Prepared, SkError};
 use frf_data::cmif::{cmif, pick_peaks, PeakConfig};
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
@@ -489,11 +489,14 @@ impl SkInit {
                     let (f, fc, better) = match &best {
                         None => (None, None, true),
                         Some((nb, b)) => {
-                            let dp = params(n).saturating_sub(params(*nb)).max(1);
-                            let dof = n_res.saturating_sub(params(n)).max(1) as f64;
-                            let s2 = c.cost / dof;
-                            let f = ((b.cost - c.cost) / dp as f64) / s2.max(f64::MIN_POSITIVE);
-                            let fc = f_critical(dp, cfg.order_alpha);
+                            let (f, fc) = f_test(
+                                b.cost,
+                                c.cost,
+                                params(n).saturating_sub(params(*nb)),
+                                n_res,
+                                params(n),
+                                cfg.order_alpha,
+                            );
                             (Some(f), Some(fc), f > fc || exact)
                         }
                     };
@@ -690,11 +693,14 @@ impl Estimator for SkInit {
             // its accuracy)
             if let Ok((without, c0)) = fit_residues(&prep, &cand.poles, cfg.hold, false) {
                 let m = prep.m();
-                let n_res = 2 * prep.n_lines() * m;
-                let dof = n_res.saturating_sub(order + m * (order + 1)).max(1) as f64;
-                let s2 = cand.cost / dof;
-                let f = ((c0 - cand.cost) / m as f64) / s2.max(f64::MIN_POSITIVE);
-                let fc = f_critical(m, cfg.order_alpha);
+                let (f, fc) = f_test(
+                    c0,
+                    cand.cost,
+                    m,
+                    2 * prep.n_lines() * m,
+                    order + m * (order + 1),
+                    cfg.order_alpha,
+                );
                 if f <= fc {
                     messages.push(format!(
                         "feedthrough left out: F = {f:.2} for its {m} entries, below {fc:.2}"

@@ -65,6 +65,24 @@ pub fn f_critical(p: usize, alpha: f64) -> f64 {
     chi2_upper(p, alpha) / p
 }
 
+/// The F statistic of `dp` parameters that lower the weighted cost from `cost_without`
+/// to `cost_with`, the noise scale estimated from `cost_with` over `n_res` real equations
+/// and `p_with` parameters, and its critical value at `alpha`: `(F, F_critical)`.
+pub fn f_test(
+    cost_without: f64,
+    cost_with: f64,
+    dp: usize,
+    n_res: usize,
+    p_with: usize,
+    alpha: f64,
+) -> (f64, f64) {
+    let dp = dp.max(1);
+    let dof = n_res.saturating_sub(p_with).max(1) as f64;
+    let s2 = cost_with / dof;
+    let f = ((cost_without - cost_with) / dp as f64) / s2.max(f64::MIN_POSITIVE);
+    (f, f_critical(dp, alpha))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
