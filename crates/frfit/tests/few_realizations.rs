@@ -4,50 +4,15 @@
 //! realizations the variance came from, the residual analysis accounts for it, and a
 //! model at the noise level is called noise-limited. Simulated wafer stage, no files.
 
-use experiment::nonparametric::{EstimatorConfig, LineGrid};
-use experiment::synth::{
-    ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
-    WaferStageExperiment,
-};
+mod common;
+
 use frf_data::Frf;
 use frfit::pipeline::{run, PipelineConfig};
 
 /// The wafer stage (seed 3), 2 periods x 3 realizations, lines up to 2 kHz, with the
 /// comments `frfit simulate` writes.
 fn three_realizations() -> Frf {
-    let stage = WaferStageConfig {
-        seed: 3,
-        ..WaferStageConfig::default()
-    };
-    let exp = ExperimentConfig {
-        grid: LineGrid::odd(stage.fs, 40_000, 0.0, 2000.0).unwrap(),
-        periods: 2,
-        realizations: 3,
-        transient_periods: 1,
-        rms: 2.0,
-        output_noise: NoiseConfig {
-            white_rms: 1e-9,
-            drift_rms: 5e-9,
-            drift_corner_hz: 0.5,
-        },
-        input_noise_rms: 0.0,
-        cubic_nonlinearity: 0.0,
-        stochastic_distortion: 0.0,
-        delay_samples: stage.delay_samples,
-        excited_inputs: None,
-        seed: 3,
-        keep_time_signals: false,
-    };
-    let w = WaferStageExperiment::new(&stage, &ControllerConfig::default(), exp).unwrap();
-    let mut est = w
-        .experiment
-        .estimate(SimulationPath::FrequencyDomain, &EstimatorConfig::default())
-        .unwrap();
-    est.frf.comments = vec![
-        "sampling 10 kHz; zero-order hold + 1 sample(s) computation delay (150 us)".into(),
-        "closed-loop indirect estimate, 2 periods x 3 realizations".into(),
-    ];
-    est.frf
+    common::simulated_wafer(2, 3, 0.0).0
 }
 
 #[test]

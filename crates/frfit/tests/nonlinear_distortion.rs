@@ -5,11 +5,8 @@
 //! estimated from the periods of one realization, a known answer; and on the measured
 //! motor bench of `../shared/data/real` (skipped with a message when absent).
 
-use experiment::nonparametric::{EstimatorConfig, LineGrid};
-use experiment::synth::{
-    ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
-    WaferStageExperiment,
-};
+mod common;
+
 use frf_data::io::read_frf_csv;
 use frf_data::shared_data::require;
 use frf_data::{Frf, FrfDataset};
@@ -19,39 +16,7 @@ use frfit::pipeline::{run, PipelineConfig, PipelineOutput};
 /// stochastic nonlinear contribution of relative level `distortion`; the estimate and
 /// the exact response.
 fn one_realization(distortion: f64) -> (Frf, Frf) {
-    let stage = WaferStageConfig {
-        seed: 3,
-        ..WaferStageConfig::default()
-    };
-    let exp = ExperimentConfig {
-        grid: LineGrid::odd(stage.fs, 40_000, 0.0, 2000.0).unwrap(),
-        periods: 10,
-        realizations: 1,
-        transient_periods: 1,
-        rms: 2.0,
-        output_noise: NoiseConfig {
-            white_rms: 1e-9,
-            drift_rms: 5e-9,
-            drift_corner_hz: 0.5,
-        },
-        input_noise_rms: 0.0,
-        cubic_nonlinearity: 0.0,
-        stochastic_distortion: distortion,
-        delay_samples: stage.delay_samples,
-        excited_inputs: None,
-        seed: 3,
-        keep_time_signals: false,
-    };
-    let w = WaferStageExperiment::new(&stage, &ControllerConfig::default(), exp).unwrap();
-    let mut est = w
-        .experiment
-        .estimate(SimulationPath::FrequencyDomain, &EstimatorConfig::default())
-        .unwrap();
-    est.frf.comments = vec![
-        "sampling 10 kHz; zero-order hold + 1 sample(s) computation delay (150 us)".into(),
-        "closed-loop indirect estimate, 10 periods x 1 realizations".into(),
-    ];
-    (est.frf, w.experiment.true_frf().unwrap())
+    common::simulated_wafer(10, 1, distortion)
 }
 
 fn diagnose(data: &Frf, name: &str, band: Option<(f64, f64)>) -> PipelineOutput {

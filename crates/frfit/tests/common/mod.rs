@@ -3,6 +3,11 @@
 
 #![allow(dead_code)]
 
+use experiment::nonparametric::{EstimatorConfig, LineGrid};
+use experiment::synth::{
+    ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
+    WaferStageExperiment,
+};
 use faer::Mat;
 use frf_data::{Frf, FrfDataset};
 use realize::{ModalModel, PolePair};
@@ -94,4 +99,44 @@ pub fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
     )
     .unwrap();
     path
+}
+
+/// The simulated wafer stage (seed 3), `periods` x `realizations`, lines up to 2 kHz,
+/// with a stochastic nonlinear contribution of relative level `distortion` (new in each
+/// realization), estimated in the frequency domain and commented as `frfit simulate`
+/// writes; the estimate and the exact response.
+pub fn simulated_wafer(periods: usize, realizations: usize, distortion: f64) -> (Frf, Frf) {
+    let stage = WaferStageConfig {
+        seed: 3,
+        ..WaferStageConfig::default()
+    };
+    let exp = ExperimentConfig {
+        grid: LineGrid::odd(stage.fs, 40_000, 0.0, 2000.0).unwrap(),
+        periods,
+        realizations,
+        transient_periods: 1,
+        rms: 2.0,
+        output_noise: NoiseConfig {
+            white_rms: 1e-9,
+            drift_rms: 5e-9,
+            drift_corner_hz: 0.5,
+        },
+        input_noise_rms: 0.0,
+        cubic_nonlinearity: 0.0,
+        stochastic_distortion: distortion,
+        delay_samples: stage.delay_samples,
+        excited_inputs: None,
+        seed: 3,
+        keep_time_signals: false,
+    };
+    let w = WaferStageExperiment::new(&stage, &ControllerConfig::default(), exp).unwrap();
+    let mut est = w
+        .experiment
+        .estimate(SimulationPath::FrequencyDomain, &EstimatorConfig::default())
+        .unwrap();
+    est.frf.comments = vec![
+        "sampling 10 kHz; zero-order hold + 1 sample(s) computation delay (150 us)".into(),
+        format!("closed-loop indirect estimate, {periods} periods x {realizations} realizations"),
+    ];
+    (est.frf, w.experiment.true_frf().unwrap())
 }
