@@ -1093,6 +1093,20 @@ fn markdown(
         s.initial.cmif_peaks.len(),
         plural(s.initial.cmif_peaks.len()),
     );
+    if let Some(r) = &s.initial.restart {
+        let _ = writeln!(
+            md,
+            "**Better first fit.** A restart from {} ended significantly better than the \
+             chain's first fit (F = {:.3e}, critical {:.3}) and replaced it: {} mode{} with \
+             residual/noise {:.3} before. A restart is not an effect: it is not a step.\n",
+            r.from,
+            r.f_statistic,
+            r.f_critical,
+            r.replaced_modes,
+            plural(r.replaced_modes),
+            r.replaced_errors.residual_to_noise
+        );
+    }
 
     // The verdict.
     let _ = writeln!(

@@ -100,6 +100,25 @@ pub struct InitialSummary {
     pub errors: ErrorStats,
     /// Declared (known) effects: hold, delay, from the command line or the file.
     pub declared: Vec<String>,
+    /// When a restart replaced the estimator chain's first fit (a better first fit, not
+    /// an effect): where it started and what it replaced.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub restart: Option<RestartSummary>,
+}
+
+/// A restart that replaced the chain's first fit because it ended significantly better.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RestartSummary {
+    /// What the restart started from.
+    pub from: String,
+    /// Modes of the replaced first fit.
+    pub replaced_modes: usize,
+    /// Errors of the replaced first fit.
+    pub replaced_errors: ErrorStats,
+    /// F statistic of the restart's cost decrease against the replaced fit.
+    pub f_statistic: f64,
+    /// Its critical value.
+    pub f_critical: f64,
 }
 
 /// One step of the diagnosis loop: a candidate effect, tested.

@@ -23,10 +23,12 @@
 mod accept;
 mod candidate;
 mod fitted;
+mod restart;
 mod trial;
 
 pub use candidate::{Candidate, DelayStart, Proposal};
 pub use fitted::{FittedEffect, PoleParams, Refit};
+pub use restart::{better_first_fit, DelayRestart, Restarted};
 
 use crate::pipeline::{err, error_stats, FitContext, PipelineConfig};
 use crate::summary::{ErrorStats, StepSummary};
@@ -70,17 +72,21 @@ struct State {
     analysis: ResidualAnalysis,
     tested: Vec<(Effect, String)>,
     restart_tested: bool,
+    /// The delay restart made before the loop ([`better_first_fit`]), for round 1.
+    delay_restart: Option<DelayRestart>,
     n_tests: usize,
     n_accepted: usize,
 }
 
 /// Runs the diagnosis loop from `first` (the first fit of `ctx.band`, whose response
-/// at the band's lines is `first_response`).
+/// at the band's lines is `first_response`); `delay_restart` is the delay restart that
+/// [`better_first_fit`] made already, if any.
 pub fn diagnose(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     first: Fit<AdditiveModel>,
     first_response: &ResponseGrid,
+    delay_restart: Option<DelayRestart>,
 ) -> Result<Diagnosis, FrfitError> {
     let mut fit = first;
     let fd = &ctx.fit_data;
@@ -105,13 +111,17 @@ pub fn diagnose(
         analysis,
         tested: Vec::new(),
         restart_tested: false,
+        delay_restart,
         n_tests: 0,
         n_accepted: 0,
     };
     let mut steps: Vec<StepSummary> = Vec::new();
     let mut step_responses = Vec::new();
     while st.analysis.significant && st.n_accepted < cfg.max_steps {
-        let Some(trials) = round(ctx, cfg, &riv, &mut st) else {
+        let trials = round(ctx, cfg, &riv, &mut st);
+        // the delay restart was made against the first fit: later rounds make their own
+        st.delay_restart = None;
+        let Some(trials) = trials else {
             break;
         };
         let before = error_stats(&ctx.band, &st.response, &ctx.noise);
@@ -211,7 +221,12 @@ fn round(
     if !st.model.factor.fit_delay && !st.restart_tested && has(Effect::Delay) {
         st.restart_tested = true;
         progress("a delay with a refit from the start".into());
-        trials.extend(trial::restart_with_delay(ctx, cfg, &current));
+        trials.extend(trial::restart_with_delay(
+            ctx,
+            cfg,
+            &current,
+            st.delay_restart.take(),
+        ));
     }
     let joint_passed = trials
         .iter()

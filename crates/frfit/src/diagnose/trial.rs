@@ -4,13 +4,12 @@
 
 use super::candidate::Proposal;
 use super::fitted::{FittedEffect, Refit};
-use crate::pipeline::chain_fit;
 use crate::pipeline::{err, FitContext, PipelineConfig};
 use crate::FrfitError;
 use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::significance::{chi2_upper, f_statistic, noise_scale};
 use additive_riv::structure::{local_energy, AdaptConfig, ResidualStats};
-use additive_riv::{fit_numerators, AdditiveModel, DelayChoice, FitData};
+use additive_riv::{fit_numerators, AdditiveModel, FitData};
 use frf_data::ModelStructure;
 
 /// One tested candidate: the refitted model and its F test against the current model.
@@ -180,34 +179,48 @@ pub fn joint_missed_modes(
 
 /// A delay large enough to matter also misplaces the modes fitted without it: the fit
 /// from the start (the run's estimator chain, `--init`/`--refine`, with the delay
-/// estimated from the data's phase slope and refined), tested beside the incremental
-/// refit. `None` when it fails, does not
-/// lower the cost or ends without a fitted delay.
+/// estimated from the data's phase slope and refined, [`super::restart::delay_restart`];
+/// `restart` when it was made already), tested beside the incremental refit. A restart
+/// can also gain for reasons of its own (another optimum), so the trial passes only
+/// when it beats the current model AND the restart refitted with the delay held at the
+/// current value (the delay itself explains more than noise). `None` when the restart
+/// fails, does not lower the cost or ends without a fitted delay.
 pub fn restart_with_delay(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     current: &Current,
+    restart: Option<super::restart::DelayRestart>,
 ) -> Option<Trial> {
     let fd = &ctx.fit_data;
-    let fc = additive_riv::FitterConfig {
-        delay: DelayChoice::Auto,
-        ..ctx.quiet_fitter_config(cfg)
+    let r = match restart {
+        Some(r) => r,
+        None => super::restart::delay_restart(ctx, cfg, current.model)?,
     };
-    let first = chain_fit(ctx, cfg, &fc).ok()?;
-    let (m, rep) = (first.fit.model, first.report);
-    let c = model_cost(&m, fd);
-    let lowers_cost = c < current.cost;
-    if !(lowers_cost && m.factor.fit_delay) {
+    let (m, c) = (r.with_delay, r.with_delay_cost);
+    if c >= current.cost {
         return None;
     }
     let added = m.n_params().saturating_sub(current.model.n_params()).max(1);
-    let (_, f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
-    let evidence = format!(
+    let (_, mut f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
+    let mut evidence = format!(
         "the residual's phase slope; refitted from the start with the delay estimated from the data ({:.2} us) and refined to {:.2} us, {} modes",
-        rep.delay_estimate.as_ref().map_or(f64::NAN, |d| d.tau_s * 1e6),
+        r.estimate_s.map_or(f64::NAN, |t| t * 1e6),
         m.factor.delay_s * 1e6,
         m.modes().len()
     );
+    if let Some((held, held_cost)) = &r.held {
+        // the delay's own test: the same restart with the delay held at the current value
+        let (_, f_delay, f_delay_crit) = f_test(&m, fd, *held_cost, c, 1, cfg);
+        evidence = format!(
+            "{evidence}; against the same restart with the delay held at {:.2} us ({} modes): F = {f_delay:.3e} (critical {f_delay_crit:.3})",
+            current.model.factor.delay_s * 1e6,
+            held.model.modes().len()
+        );
+        if !(*held_cost > c && f_delay > f_delay_crit) {
+            evidence.push_str(": the restart's gain is not the delay's");
+            f = f.min(f_crit * (1.0 - 1e-12));
+        }
+    }
     Some(Trial {
         params: FittedEffect::delay(current.model, &m, Some(Refit::FromTheStart)),
         evidence,

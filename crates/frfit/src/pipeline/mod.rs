@@ -25,7 +25,7 @@ pub use first_fit::{chain_fit, first_fit, FirstFit};
 pub(crate) use summarize::error_stats;
 pub use summarize::final_model_summary;
 
-use crate::diagnose::{diagnose, Diagnosis};
+use crate::diagnose::{better_first_fit, diagnose, Diagnosis, Restarted};
 use crate::summary::{StageTime, Summary};
 use crate::FrfitError;
 use additive_riv::{AdditiveModel, DelayChoice, FitterReport, Hold, IvMethod, ModeSelection};
@@ -281,6 +281,23 @@ pub fn run(
     let first = first_fit(&ctx, cfg)?;
     let (fit, fitter_report) = (first.fit, first.report);
     timings.stage("fit", t);
+    // a restart that ends significantly better is a better first fit, not an effect
+    let Restarted {
+        fit,
+        summary: restart,
+        delay: delay_restart,
+    } = if cfg.diagnose && cfg.start_model.is_none() {
+        let t = Instant::now();
+        let r = better_first_fit(&ctx, cfg, fit)?;
+        timings.stage("restart", t);
+        r
+    } else {
+        Restarted {
+            fit,
+            summary: None,
+            delay: None,
+        }
+    };
     let initial_model = fit.model.clone();
     let initial_response = initial_model.response_at(&ctx.omega);
     let initial_errors = error_stats(&ctx.band, &initial_response, &ctx.noise);
@@ -290,7 +307,7 @@ pub fn run(
         step_responses,
     } = if cfg.diagnose {
         let t = Instant::now();
-        let d = diagnose(&ctx, cfg, fit, &initial_response)?;
+        let d = diagnose(&ctx, cfg, fit, &initial_response, delay_restart)?;
         timings.stage("diagnose", t);
         d
     } else {
@@ -335,6 +352,7 @@ pub fn run(
             initial_model: &initial_model,
             fitter_report: &fitter_report,
             initial_errors,
+            restart,
             steps,
             fit: &fit,
             analysis: &analysis,

@@ -308,6 +308,8 @@ pub(crate) struct RunRecord<'a> {
     pub fitter_report: &'a FitterReport,
     /// The first model's errors.
     pub initial_errors: ErrorStats,
+    /// The restart that replaced the chain's first fit, when one did.
+    pub restart: Option<crate::summary::RestartSummary>,
     /// The diagnosis steps.
     pub steps: Vec<StepSummary>,
     /// The final fit.
@@ -401,6 +403,7 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
                 .collect(),
             errors: run.initial_errors,
             declared: ctx.declared_list.clone(),
+            restart: run.restart,
         },
         steps: run.steps,
         verdict: verdict.into(),
