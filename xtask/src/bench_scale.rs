@@ -81,7 +81,7 @@ fn parse_size(s: &str) -> Result<(usize, usize, usize), Error> {
 }
 
 /// The `frfit` binary beside this one (both are built in the release profile).
-fn frfit_binary() -> Result<PathBuf, Error> {
+pub(crate) fn frfit_binary() -> Result<PathBuf, Error> {
     let me = std::env::current_exe().stage("frfit binary")?;
     let dir = me
         .parent()
@@ -103,7 +103,7 @@ fn frfit_binary() -> Result<PathBuf, Error> {
 }
 
 /// Runs `cmd`, returning its success, wall time and peak resident memory (MB).
-fn run_measured(cmd: &mut Command) -> Result<(bool, f64, Option<f64>), Error> {
+pub(crate) fn run_measured(cmd: &mut Command) -> Result<(bool, f64, Option<f64>), Error> {
     let t0 = Instant::now();
     let mut child = cmd.spawn().stage("frfit fit")?;
     let status_file = format!("/proc/{}/status", child.id());

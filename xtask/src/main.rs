@@ -9,7 +9,10 @@
 //! - `fuzz READER --runs N`: coverage-guided fuzzing of one reader (see `fuzz.rs`).
 //! - `bench-scale`: wall time, peak memory and accuracy of `frfit fit` on random modal
 //!   plants of growing size (see `bench_scale.rs`).
+//! - `bench-diagnose`: wall time of `frfit diagnose` against one `frfit fit` on the
+//!   reference cases (see `bench_diagnose.rs`).
 
+mod bench_diagnose;
 mod bench_scale;
 mod fuzz;
 mod oomen_bosgra;
@@ -47,6 +50,9 @@ enum Task {
     /// Wall time, peak memory and accuracy of `frfit fit` on random modal plants of
     /// growing size (4x13x17, 20x20x50, 50x50x100 by default).
     BenchScale(bench_scale::Args),
+    /// Wall time of `frfit diagnose` against one `frfit fit` on the reference cases of
+    /// ../shared/data (median ratio over the cases).
+    BenchDiagnose(bench_diagnose::Args),
 }
 
 /// An error of a task: which stage failed and why.
@@ -94,6 +100,7 @@ fn main() -> ExitCode {
         Some(Task::OomenBosgra(args)) => oomen_bosgra::run(args),
         Some(Task::Fuzz(args)) => fuzz::run(args),
         Some(Task::BenchScale(args)) => bench_scale::run(args),
+        Some(Task::BenchDiagnose(args)) => bench_diagnose::run(args),
         None => {
             let mut cmd = Cli::command();
             match cmd.print_help() {

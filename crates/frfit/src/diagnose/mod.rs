@@ -37,6 +37,7 @@ use additive_riv::riv::RivConfig;
 use additive_riv::structure::ResidualStats;
 use additive_riv::AdditiveModel;
 use frf_data::{Fit, ModelStructure, ProgressSink};
+use rayon::prelude::*;
 use realize::ResponseGrid;
 use trial::{model_cost, Current, Trial};
 use validation::residual::{analyze_residual, Effect, ResidualAnalysis};
@@ -199,49 +200,125 @@ fn round(
         stats: &stats,
     };
     let round_no = st.n_accepted + 1;
-    let mut n_tests = st.n_tests;
-    let mut progress = |what: String| {
-        n_tests += 1;
+    let n_tests = std::sync::atomic::AtomicUsize::new(st.n_tests);
+    let progress = |what: String| {
+        let n = n_tests.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         cfg.progress.step(
             "diagnose",
-            n_tests,
+            n,
             None,
             None,
             format!("round {round_no}: testing {what}"),
         );
     };
     let has = |e: Effect| proposals.iter().any(|p| p.candidate.effect() == e);
-    let mut trials: Vec<Trial> = Vec::new();
-    // When the joint missed-mode trial passes its F test, the single-peak candidates it
-    // subsumes are not refitted one by one.
-    if has(Effect::MissedMode) {
-        progress("missed modes jointly".into());
-        trials.extend(trial::joint_missed_modes(ctx, cfg, riv, &current));
+    // The trials of a round are independent refits of the same current model: they run
+    // in parallel (rayon), in two waves. The first holds the joint missed-mode trial,
+    // the delay restart and every candidate that is not a single missed mode; the
+    // single-peak missed modes follow only when the joint trial did not pass its F
+    // test (it subsumes them). Each wave keeps the order of its jobs.
+    let restart = (!st.model.factor.fit_delay && !st.restart_tested && has(Effect::Delay))
+        .then(|| st.delay_restart.take());
+    st.restart_tested |= restart.is_some();
+    let joint = has(Effect::MissedMode);
+    let (modes, others): (Vec<Proposal>, Vec<Proposal>) = proposals
+        .into_iter()
+        .partition(|p| p.candidate.effect() == Effect::MissedMode);
+    let mut first_wave: Vec<Job> = Vec::new();
+    if joint {
+        first_wave.push(Job::JointModes);
     }
-    if !st.model.factor.fit_delay && !st.restart_tested && has(Effect::Delay) {
-        st.restart_tested = true;
-        progress("a delay with a refit from the start".into());
-        trials.extend(trial::restart_with_delay(
-            ctx,
-            cfg,
-            &current,
-            st.delay_restart.take(),
-        ));
+    if let Some(r) = restart {
+        first_wave.push(Job::DelayRestart(Box::new(r)));
     }
+    first_wave.extend(others.into_iter().map(Job::Candidate));
+    let run = |jobs: Vec<Job>| -> Vec<Trial> {
+        jobs.into_par_iter()
+            .map(|job| match job {
+                Job::JointModes => {
+                    progress("missed modes jointly".into());
+                    trial::joint_missed_modes(ctx, cfg, riv, &current)
+                }
+                Job::DelayRestart(r) => {
+                    progress("a delay with a refit from the start".into());
+                    trial::restart_with_delay(ctx, cfg, &current, *r)
+                }
+                Job::Candidate(p) => {
+                    progress(effect_name(p.candidate.effect()).into());
+                    trial::refit_candidate(ctx, cfg, riv, &current, p, Some(SCREEN_ITERATIONS))
+                }
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>()
+    };
+    // screened refits that can still be the round's best continue to convergence
+    let finish = |trials: Vec<Trial>| -> Vec<Trial> {
+        let best_drop = trials
+            .iter()
+            .map(|t| current.cost - t.cost)
+            .fold(0.0_f64, f64::max);
+        trials
+            .into_par_iter()
+            .filter_map(|mut t| {
+                let Some(sc) = &t.screened else {
+                    return Some(t);
+                };
+                let drop = current.cost - t.cost;
+                if drop >= SCREEN_KEEP * best_drop {
+                    return trial::finish(ctx, cfg, riv, &current, t);
+                }
+                t.evidence = format!(
+                    "{}; screened: the refit stopped after {} iterations with {:.2}% of the round's best cost decrease, so it cannot be the round's best and was not refitted to convergence",
+                    t.evidence,
+                    sc.iterations,
+                    100.0 * drop / best_drop.max(f64::MIN_POSITIVE)
+                );
+                t.screened = None;
+                Some(t)
+            })
+            .collect()
+    };
+    for p in &first_wave {
+        if let Job::Candidate(p) = p {
+            st.tested.push((p.candidate.effect(), p.candidate.key()));
+        }
+    }
+    let mut trials = finish(run(first_wave));
     let joint_passed = trials
         .iter()
         .any(|t| t.passes() && t.params.effect() == Effect::MissedMode);
-    for p in proposals {
-        let effect = p.candidate.effect();
-        if joint_passed && effect == Effect::MissedMode {
-            continue;
+    if !joint_passed && !modes.is_empty() {
+        for p in &modes {
+            st.tested.push((p.candidate.effect(), p.candidate.key()));
         }
-        st.tested.push((effect, p.candidate.key()));
-        progress(effect_name(effect).into());
-        trials.extend(trial::refit_candidate(ctx, cfg, riv, &current, p));
+        trials.extend(run(modes.into_iter().map(Job::Candidate).collect()));
+        trials = finish(trials);
     }
-    st.n_tests = n_tests;
+    st.n_tests = n_tests.into_inner();
     (!trials.is_empty()).then_some(trials)
+}
+
+/// Iterations of a candidate's screening refit: a refit that has not converged by then
+/// continues only when its cost decrease is at least [`SCREEN_KEEP`] of the round's best
+/// (most of a refit's decrease comes in its first iterations; the rest are spent on
+/// candidates that cannot win the round).
+const SCREEN_ITERATIONS: usize = 4;
+
+/// The fraction of the round's best cost decrease a screened refit must reach to be
+/// refitted to convergence.
+const SCREEN_KEEP: f64 = 0.25;
+
+/// One trial of a round, run on its own thread.
+enum Job {
+    /// The missed modes jointly ([`trial::joint_missed_modes`]).
+    JointModes,
+    /// The delay by a refit from the start ([`trial::restart_with_delay`]), with the
+    /// restart made before the loop when there is one.
+    DelayRestart(Box<Option<DelayRestart>>),
+    /// One proposed candidate ([`trial::refit_candidate`]).
+    Candidate(Proposal),
 }
 
 /// The steps of `tr`: one, or for a joint missed-mode trial one per mode it added.

@@ -32,6 +32,20 @@ pub struct Trial {
     /// For the joint missed-mode trial: (frequency, damping) of every mode it added,
     /// each reported as its own `missed_mode` step.
     pub joint_modes: Vec<(f64, f64)>,
+    /// Set while the refit stopped at the screening cap before converging: what
+    /// [`finish`] needs to continue it.
+    pub screened: Option<Screened>,
+}
+
+/// A candidate refit stopped at the screening cap ([`refit_candidate`] with `cap`).
+#[derive(Debug, Clone)]
+pub struct Screened {
+    /// The candidate.
+    pub candidate: super::Candidate,
+    /// The evidence that proposed it.
+    pub evidence: String,
+    /// Iterations run.
+    pub iterations: usize,
 }
 
 impl Trial {
@@ -94,11 +108,13 @@ pub fn f_test(
 }
 
 /// Refits a candidate: numerators (eq. 24), then Algorithm 1 to a coarse tolerance.
+/// Returns the model, its cost, the iterations run and whether they converged (not
+/// stopped by the iteration cap).
 fn refit(
     model: AdditiveModel,
     fd: &FitData,
     riv: &RivConfig,
-) -> Result<(AdditiveModel, f64), FrfitError> {
+) -> Result<(AdditiveModel, f64, usize, bool), FrfitError> {
     let mut m = model;
     fit_numerators(&mut m, fd).map_err(err("refit"))?;
     let f = iterate(m, fd, riv).map_err(err("refit"))?;
@@ -112,8 +128,9 @@ fn refit(
             why: reason.clone(),
         });
     }
+    let capped = matches!(f.convergence, frf_data::Convergence::MaxIterations { .. });
     let c = model_cost(&f.model, fd);
-    Ok((f.model, c))
+    Ok((f.model, c, f.iterations, !capped))
 }
 
 /// What every trial of a round is tested against.
@@ -174,6 +191,7 @@ pub fn joint_missed_modes(
         f_crit,
         added,
         joint_modes: joint,
+        screened: None,
     })
 }
 
@@ -230,36 +248,89 @@ pub fn restart_with_delay(
         f_crit,
         added,
         joint_modes: Vec::new(),
+        screened: None,
     })
 }
 
 /// The candidate of `proposal` added to the current model, refitted and F-tested;
-/// `None` when the augmentation or the refit fails. A missed mode must also remove
-/// most (75 %) of the residual within 1 % of its peak, or its F statistic is held
-/// below the critical value.
+/// `None` when the augmentation or the refit fails. With `cap`, the refit stops after
+/// that many iterations (a screening: [`Trial::screened`] is set when it had not
+/// converged, and [`finish`] continues it). A missed mode must also remove most (75 %)
+/// of the residual within 1 % of its peak, or its F statistic is held below the
+/// critical value.
 pub fn refit_candidate(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     riv: &RivConfig,
     current: &Current,
     proposal: Proposal,
+    cap: Option<usize>,
 ) -> Option<Trial> {
     let fd = &ctx.fit_data;
     let Proposal {
         candidate,
-        mut evidence,
+        evidence,
     } = proposal;
     let aug = candidate.augment(current.model).ok()?;
-    let added = aug
-        .n_params()
-        .saturating_sub(current.model.n_params())
-        .max(1);
-    let (m, c) = refit(aug, fd, riv).ok()?;
+    let riv_capped = RivConfig {
+        max_iterations: cap.map_or(riv.max_iterations, |c| c.min(riv.max_iterations)),
+        ..riv.clone()
+    };
+    let (m, c, iterations, converged) = refit(aug, fd, &riv_capped).ok()?;
+    let screened = (cap.is_some() && !converged).then(|| Screened {
+        candidate: candidate.clone(),
+        evidence: evidence.clone(),
+        iterations,
+    });
+    let mut tr = judge(cfg, fd, current, &candidate, evidence, m, c);
+    tr.screened = screened;
+    Some(tr)
+}
+
+/// Continues a screened trial's refit to convergence from where the screening stopped
+/// and tests it again; a trial that is not screened is returned as it is. `None` when
+/// the continued refit fails.
+pub fn finish(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    riv: &RivConfig,
+    current: &Current,
+    tr: Trial,
+) -> Option<Trial> {
+    let Some(sc) = tr.screened else {
+        return Some(tr);
+    };
+    let fd = &ctx.fit_data;
+    let f = iterate(tr.model, fd, riv).ok()?;
+    let c = model_cost(&f.model, fd);
+    Some(judge(
+        cfg,
+        fd,
+        current,
+        &sc.candidate,
+        sc.evidence,
+        f.model,
+        c,
+    ))
+}
+
+/// The trial of `candidate` refitted to `m` (cost `c`): its F test against the current
+/// model and, for a missed mode, the local test at its peak.
+fn judge(
+    cfg: &PipelineConfig,
+    fd: &FitData,
+    current: &Current,
+    candidate: &super::Candidate,
+    mut evidence: String,
+    m: AdditiveModel,
+    c: f64,
+) -> Trial {
+    let added = m.n_params().saturating_sub(current.model.n_params()).max(1);
     let (stats, mut f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
     if let super::Candidate::MissedMode { peak_hz: fp, .. } = candidate {
         let half = 0.01 * fp;
-        let ratio = local_energy(&stats, fd, fp, half)
-            / local_energy(current.stats, fd, fp, half).max(f64::MIN_POSITIVE);
+        let ratio = local_energy(&stats, fd, *fp, half)
+            / local_energy(current.stats, fd, *fp, half).max(f64::MIN_POSITIVE);
         evidence = format!(
             "{evidence}; after the refit {:.0}% of the residual within 1% of the peak remains",
             100.0 * ratio
@@ -268,8 +339,8 @@ pub fn refit_candidate(
             f = f.min(f_crit * (1.0 - 1e-12));
         }
     }
-    let params = FittedEffect::of_refit(&candidate, current.model, &m);
-    Some(Trial {
+    let params = FittedEffect::of_refit(candidate, current.model, &m);
+    Trial {
         params,
         evidence,
         model: m,
@@ -278,5 +349,6 @@ pub fn refit_candidate(
         f_crit,
         added,
         joint_modes: Vec::new(),
-    })
+        screened: None,
+    }
 }
