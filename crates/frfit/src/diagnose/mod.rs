@@ -28,7 +28,9 @@ mod trial;
 
 pub use candidate::{Candidate, DelayStart, Proposal};
 pub use fitted::{FittedEffect, PoleParams, Refit};
-pub use restart::{better_first_fit, DelayRestart, Restarted};
+pub use restart::{
+    better_first_fit, delay_restart, worth_a_delay_restart, DelayRestart, Restarted,
+};
 
 use crate::pipeline::{err, error_stats, FitContext, PipelineConfig};
 use crate::summary::{ErrorStats, StepSummary};
@@ -63,6 +65,9 @@ pub struct Diagnosis {
     pub steps: Vec<StepSummary>,
     /// Per step, the model response before and after.
     pub step_responses: Vec<(ResponseGrid, ResponseGrid)>,
+    /// Wall time of each round (its trials, the acceptance and the pruning) and of the
+    /// final refinement, seconds.
+    pub stages: Vec<(String, f64)>,
 }
 
 /// The state of the loop between rounds.
@@ -118,8 +123,16 @@ pub fn diagnose(
     };
     let mut steps: Vec<StepSummary> = Vec::new();
     let mut step_responses = Vec::new();
+    let mut stages: Vec<(String, f64)> = Vec::new();
+    let mut n_round = 0;
     while st.analysis.significant && st.n_accepted < cfg.max_steps {
+        let t_round = std::time::Instant::now();
+        n_round += 1;
         let trials = round(ctx, cfg, &riv, &mut st);
+        stages.push((
+            format!("diagnose: round {n_round} trials"),
+            t_round.elapsed().as_secs_f64(),
+        ));
         // the delay restart was made against the first fit: later rounds make their own
         st.delay_restart = None;
         let Some(trials) = trials else {
@@ -163,11 +176,17 @@ pub fn diagnose(
         )
         .map_err(err("residual analysis"))?;
     }
+    let t_final = std::time::Instant::now();
     let fit = accept::final_refinement(ctx, cfg, fit, st.model)?;
+    stages.push((
+        "diagnose: final refinement".into(),
+        t_final.elapsed().as_secs_f64(),
+    ));
     Ok(Diagnosis {
         fit,
         steps,
         step_responses,
+        stages,
     })
 }
 

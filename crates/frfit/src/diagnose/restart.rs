@@ -36,15 +36,17 @@ pub struct DelayRestart {
     pub held: Option<(Fit<AdditiveModel>, f64)>,
     /// The data's delay estimate the restart started from, seconds.
     pub estimate_s: Option<f64>,
+    /// The delay `held` holds, seconds.
+    pub held_delay_s: f64,
 }
 
-/// The restart of `current` (its delay not fitted) from the start with the data's delay
-/// estimate, and its refit with the delay held at `current`'s. `None` when the chain
-/// fails or ends without a fitted delay.
+/// The restart from the start with the data's delay estimate, and its refit with the
+/// delay held at `held_delay_s` (the delay of the model it is tested against, not
+/// fitted). `None` when the chain fails or ends without a fitted delay.
 pub fn delay_restart(
     ctx: &FitContext,
     cfg: &PipelineConfig,
-    current: &AdditiveModel,
+    held_delay_s: f64,
 ) -> Option<DelayRestart> {
     let fd = &ctx.fit_data;
     let fc = additive_riv::FitterConfig {
@@ -59,7 +61,7 @@ pub fn delay_restart(
     let c = model_cost(&m, fd);
     let mut held = m.clone();
     held.factor.fit_delay = false;
-    held.factor.delay_s = current.factor.delay_s;
+    held.factor.delay_s = held_delay_s;
     let held = fit_numerators(&mut held, fd)
         .ok()
         .and_then(|_| iterate(held, fd, &fc.riv).ok())
@@ -72,6 +74,7 @@ pub fn delay_restart(
         with_delay_cost: c,
         held,
         estimate_s: first.report.delay_estimate.as_ref().map(|d| d.tau_s),
+        held_delay_s,
     })
 }
 
@@ -85,16 +88,38 @@ pub struct Restarted {
     pub delay: Option<DelayRestart>,
 }
 
+/// The delay the first fit will hold when the data's own delay estimate is far enough
+/// from it to misplace its modes (a phase error above 0.05 rad, about 3 degrees, at the
+/// band's top line): then [`delay_restart`] is worth running beside the first fit
+/// (`crate::pipeline::run` does so in parallel). `None` when the first fit fits the
+/// delay itself, the data have no delay estimate, or the two agree.
+pub fn worth_a_delay_restart(ctx: &FitContext) -> Option<f64> {
+    let held = match ctx.delay {
+        DelayChoice::Fixed { seconds } => seconds,
+        DelayChoice::None => 0.0,
+        _ => return None,
+    };
+    let hold_half = match ctx.hold {
+        Some(additive_riv::Hold::Zoh { fs_hz }) => 0.5 / fs_hz,
+        _ => 0.0,
+    };
+    let total = ctx.data_delay_s()?;
+    let w_top = ctx.omega.iter().copied().fold(0.0_f64, f64::max);
+    ((total - hold_half - held).abs() * w_top > 0.05).then_some(held)
+}
+
 /// Tests restarts of the first fit before the diagnosis loop: when the first fit's
 /// residual is significant and calls for a delay (the residual's or the data's phase
 /// slope), the fit from the start with the data's delay estimate, refitted with the
 /// delay held at the first fit's value, replaces the first fit when its F test (the
 /// cost decrease per added parameter, at least one, at `cfg.alpha`) passes. The delay
-/// restart is returned for the loop's `delay` trial.
+/// restart (`speculative` when it was made beside the first fit and holds the first
+/// fit's delay) is returned for the loop's `delay` trial.
 pub fn better_first_fit(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     first: Fit<AdditiveModel>,
+    speculative: Option<DelayRestart>,
 ) -> Result<Restarted, FrfitError> {
     let unchanged = |fit| Restarted {
         fit,
@@ -132,14 +157,12 @@ pub fn better_first_fit(
     if !calls_for_delay {
         return Ok(unchanged(first));
     }
-    cfg.progress.step(
-        "diagnose",
-        0,
-        None,
-        None,
-        "restart from the data's delay estimate",
-    );
-    let Some(restart) = delay_restart(ctx, cfg, &first.model) else {
+    let held_delay = first.model.factor.delay_s;
+    let restart = match speculative {
+        Some(r) if r.held_delay_s == held_delay => Some(r),
+        _ => delay_restart(ctx, cfg, held_delay),
+    };
+    let Some(restart) = restart else {
         return Ok(unchanged(first));
     };
     let cost = model_cost(&first.model, fd);

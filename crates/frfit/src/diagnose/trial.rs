@@ -212,7 +212,7 @@ pub fn restart_with_delay(
     let fd = &ctx.fit_data;
     let r = match restart {
         Some(r) => r,
-        None => super::restart::delay_restart(ctx, cfg, current.model)?,
+        None => super::restart::delay_restart(ctx, cfg, current.model.factor.delay_s)?,
     };
     let (m, c) = (r.with_delay, r.with_delay_cost);
     if c >= current.cost {

@@ -25,7 +25,9 @@ pub use first_fit::{chain_fit, first_fit, FirstFit};
 pub(crate) use summarize::error_stats;
 pub use summarize::final_model_summary;
 
-use crate::diagnose::{better_first_fit, diagnose, Diagnosis, Restarted};
+use crate::diagnose::{
+    better_first_fit, delay_restart, diagnose, worth_a_delay_restart, Diagnosis, Restarted,
+};
 use crate::summary::{StageTime, Summary};
 use crate::FrfitError;
 use additive_riv::{AdditiveModel, DelayChoice, FitterReport, Hold, IvMethod, ModeSelection};
@@ -278,9 +280,25 @@ pub fn run(
     let mut timings = Timings::default();
     let ctx = FitContext::timed(data, cfg, &mut timings)?;
     let t = Instant::now();
-    let first = first_fit(&ctx, cfg)?;
+    // When the data's delay is far from the one the first fit holds, the diagnosis will
+    // test a restart from the data's delay estimate: it runs beside the first fit.
+    let speculate = (cfg.diagnose && cfg.start_model.is_none())
+        .then(|| worth_a_delay_restart(&ctx))
+        .flatten();
+    let (first, speculative) = match speculate {
+        Some(held) => rayon::join(|| first_fit(&ctx, cfg), || delay_restart(&ctx, cfg, held)),
+        None => (first_fit(&ctx, cfg), None),
+    };
+    let first = first?;
     let (fit, fitter_report) = (first.fit, first.report);
-    timings.stage("fit", t);
+    timings.stage(
+        if speculate.is_some() {
+            "fit (with the delay restart beside it)"
+        } else {
+            "fit"
+        },
+        t,
+    );
     // a restart that ends significantly better is a better first fit, not an effect
     let Restarted {
         fit,
@@ -288,7 +306,7 @@ pub fn run(
         delay: delay_restart,
     } = if cfg.diagnose && cfg.start_model.is_none() {
         let t = Instant::now();
-        let r = better_first_fit(&ctx, cfg, fit)?;
+        let r = better_first_fit(&ctx, cfg, fit, speculative)?;
         timings.stage("restart", t);
         r
     } else {
@@ -305,6 +323,7 @@ pub fn run(
         fit,
         steps,
         step_responses,
+        stages,
     } = if cfg.diagnose {
         let t = Instant::now();
         let d = diagnose(&ctx, cfg, fit, &initial_response, delay_restart)?;
@@ -315,8 +334,12 @@ pub fn run(
             fit,
             steps: Vec::new(),
             step_responses: Vec::new(),
+            stages: Vec::new(),
         }
     };
+    for (stage, seconds) in stages {
+        timings.0.push(StageTime { stage, seconds });
+    }
     let final_response = fit.model.response_at(&ctx.omega);
     let analysis = analyze_residual(
         &ctx.band,
