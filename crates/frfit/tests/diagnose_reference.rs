@@ -131,6 +131,13 @@ fn hidden_mode_is_held_by_the_final_model() {
     println!("hidden mode: found by the loop {in_loop}, picked at once {in_initial}");
     assert!(in_loop || in_initial);
     assert!(out.summary.final_model.modes.iter().any(|m| near(m.f_hz)));
+    // the file's delay is right: a restart that lands in a better optimum is a better
+    // first fit, not a delay step
+    assert!(
+        accepted(&out, "delay").is_empty(),
+        "no delay step: {:?}",
+        accepted(&out, "delay")
+    );
     assert_at_noise_level(&out);
 }
 

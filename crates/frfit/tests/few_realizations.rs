@@ -60,3 +60,41 @@ fn three_realizations_are_noise_limited_when_declared() {
     );
     assert_eq!(out.summary.verdict, "unexplained_residual");
 }
+
+/// Ten times the sensor noise (10 nm white, 50 nm drift RMS; 10 periods x 10
+/// realizations): the noise hides nothing the nominal model lacks, so the loop adds
+/// nothing beyond what the data declare, and the final model keeps the 17 modes.
+#[test]
+fn ten_times_the_noise_adds_nothing() {
+    let (data, truth) = common::noisy_simulated_wafer(10, 10, 0.0, 10.0);
+    let cfg = PipelineConfig {
+        band_hz: Some((20.0, 2000.0)),
+        diagnose: true,
+        ..Default::default()
+    };
+    let out = run(&data, "simulated, 10x noise", &cfg, "diagnose").unwrap();
+    let s = &out.summary;
+    let accepted: Vec<&String> = s
+        .steps
+        .iter()
+        .filter(|x| x.accepted)
+        .map(|x| &x.effect)
+        .collect();
+    println!(
+        "10x noise: verdict {}, {} modes, residual/noise {:.3}, accepted {accepted:?}, restart {:?}",
+        s.verdict,
+        s.final_model.modes.len(),
+        s.final_errors.residual_to_noise,
+        s.initial.restart.as_ref().map(|r| &r.from)
+    );
+    assert!(accepted.is_empty(), "nothing added: {accepted:?}");
+    assert_eq!(s.verdict, "noise_limited");
+    // the model against the exact response: well below the data's own noise
+    let err = common::median_rel_vs_truth(&out, &truth, 20.0, 2000.0);
+    let noise = s.data_noise_median_rel.unwrap();
+    println!("10x noise: final model vs exact median {err:.3e}, data noise {noise:.3e}");
+    assert!(
+        err < 0.5 * noise,
+        "{err:.3e} vs the data's noise {noise:.3e}"
+    );
+}

@@ -106,6 +106,17 @@ pub fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
 /// realization), estimated in the frequency domain and commented as `frfit simulate`
 /// writes; the estimate and the exact response.
 pub fn simulated_wafer(periods: usize, realizations: usize, distortion: f64) -> (Frf, Frf) {
+    noisy_simulated_wafer(periods, realizations, distortion, 1.0)
+}
+
+/// [`simulated_wafer`] with the sensor noise (white and drift) `noise_gain` times the
+/// simulator's default (1 nm white, 5 nm drift RMS).
+pub fn noisy_simulated_wafer(
+    periods: usize,
+    realizations: usize,
+    distortion: f64,
+    noise_gain: f64,
+) -> (Frf, Frf) {
     let stage = WaferStageConfig {
         seed: 3,
         ..WaferStageConfig::default()
@@ -117,8 +128,8 @@ pub fn simulated_wafer(periods: usize, realizations: usize, distortion: f64) -> 
         transient_periods: 1,
         rms: 2.0,
         output_noise: NoiseConfig {
-            white_rms: 1e-9,
-            drift_rms: 5e-9,
+            white_rms: 1e-9 * noise_gain,
+            drift_rms: 5e-9 * noise_gain,
             drift_corner_hz: 0.5,
         },
         input_noise_rms: 0.0,
@@ -139,4 +150,26 @@ pub fn simulated_wafer(periods: usize, realizations: usize, distortion: f64) -> 
         format!("closed-loop indirect estimate, {periods} periods x {realizations} realizations"),
     ];
     (est.frf, w.experiment.true_frf().unwrap())
+}
+
+/// The median over lines and entries of `|P - G| / |G|`: the final model of `out`
+/// against the exact response `clean`, on `clean`'s lines in `lo..hi` Hz.
+pub fn median_rel_vs_truth(
+    out: &frfit::pipeline::PipelineOutput,
+    clean: &Frf,
+    lo: f64,
+    hi: f64,
+) -> f64 {
+    use frf_data::{FrfDataset, ModelStructure};
+    let clean = clean.band(lo, hi).unwrap();
+    let g = out.fit.model.response(&clean);
+    let m = clean.n_entries();
+    let mut rel: Vec<f64> = (0..clean.n_lines() * m)
+        .map(|idx| {
+            let t = clean.value(idx / m, idx % m % clean.ny(), idx % m / clean.ny());
+            (g.values[idx] - t).norm() / t.norm()
+        })
+        .collect();
+    rel.sort_by(|a, b| a.total_cmp(b));
+    rel[rel.len() / 2]
 }
