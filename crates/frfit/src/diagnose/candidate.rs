@@ -2,7 +2,10 @@
 //! the parameters the refit starts from, proposed from the residual analysis.
 
 use additive_riv::structure::ResidualStats;
-use additive_riv::{augment, AdditiveModel, FactorTarget, FitData, RivError, SubmodelKind};
+use additive_riv::{
+    augment, AdditiveModel, DynamicsFactor, FactorTarget, FitData, RivError, SubmodelKind,
+};
+use frf_data::ModelStructure;
 use validation::residual::{Effect, ResidualAnalysis};
 
 /// Where a delay candidate's start comes from.
@@ -58,20 +61,84 @@ pub enum Candidate {
         /// clamps it to `[1e-3, 0.9]`).
         zeta: f64,
     },
-    /// A first-order dynamics factor on inputs (actuator dynamics).
+    /// A dynamics factor of unit static gain on one input column (actuator dynamics),
+    /// or, when `inputs` holds every input, common to every entry (an amplifier's
+    /// bandwidth).
     InputDynamics {
         /// The inputs, 1-based.
         inputs: Vec<usize>,
-        /// Starting corner frequencies, Hz.
-        poles: Vec<f64>,
+        /// Order and starting pole.
+        start: FactorStart,
     },
-    /// A first-order dynamics factor on outputs (sensor dynamics).
+    /// A dynamics factor of unit static gain on one output row (sensor or sensor-mount
+    /// dynamics); when `outputs` holds every output, common to every entry (the
+    /// equivalent form of a common `InputDynamics`).
     OutputDynamics {
         /// The outputs, 1-based.
         outputs: Vec<usize>,
-        /// Starting corner frequencies, Hz.
-        poles: Vec<f64>,
+        /// Order and starting pole.
+        start: FactorStart,
     },
+}
+
+/// The order and starting pole of a dynamics-factor candidate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FactorStart {
+    /// 1: a lag `1 / (1 + s / w)`; 2: `w^2 / (s^2 + 2 zeta w s + w^2)`.
+    pub order: usize,
+    /// Corner (order 1) or natural frequency (order 2), Hz.
+    pub f_hz: f64,
+    /// Relative damping (order 2; ignored for order 1).
+    pub zeta: f64,
+}
+
+impl FactorStart {
+    /// The start from a signature `f` of the residual at `order`: its corner (1 kHz
+    /// when the first-order fit found none) or its second-order frequency and damping
+    /// (damping clamped to `[0.005, 1]`).
+    pub fn from_signature(f: &validation::IoFactor, order: usize) -> Self {
+        if order == 2 && f.second_order.f_hz.is_finite() && f.second_order.f_hz > 0.0 {
+            FactorStart {
+                order: 2,
+                f_hz: f.second_order.f_hz,
+                zeta: f.second_order.zeta.clamp(0.005, 1.0),
+            }
+        } else {
+            let f_hz = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
+                f.pole_hz
+            } else {
+                1e3
+            };
+            FactorStart {
+                order: 1,
+                f_hz,
+                zeta: 1.0,
+            }
+        }
+    }
+
+    /// The factor on `target`.
+    pub fn factor(&self, target: FactorTarget) -> Result<DynamicsFactor, RivError> {
+        if !(self.f_hz.is_finite() && self.f_hz > 0.0) {
+            return Err(RivError::invalid(
+                "factor frequency",
+                self.f_hz,
+                "must be > 0 Hz",
+            ));
+        }
+        match self.order {
+            1 => Ok(DynamicsFactor::first_order(target, self.f_hz)),
+            2 if self.zeta.is_finite() && self.zeta > 0.0 => {
+                Ok(DynamicsFactor::second_order(target, self.f_hz, self.zeta))
+            }
+            2 => Err(RivError::invalid(
+                "factor damping",
+                self.zeta,
+                "must be > 0",
+            )),
+            o => Err(RivError::invalid("factor order", o, "must be 1 or 2")),
+        }
+    }
 }
 
 /// A candidate with the evidence that proposed it.
@@ -103,11 +170,17 @@ impl Candidate {
     pub fn key(&self) -> String {
         match self {
             Candidate::MissedMode { peak_hz, .. } => mode_key(*peak_hz),
-            Candidate::InputDynamics { inputs: v, .. }
-            | Candidate::OutputDynamics { outputs: v, .. } => v
-                .first()
-                .map(|i| format!("{}", i.saturating_sub(1)))
-                .unwrap_or_default(),
+            Candidate::InputDynamics { inputs: v, start }
+            | Candidate::OutputDynamics { outputs: v, start } => {
+                let which = if v.len() > 1 {
+                    "all".to_string()
+                } else {
+                    v.first()
+                        .map(|i| format!("{}", i.saturating_sub(1)))
+                        .unwrap_or_default()
+                };
+                format!("{which}:{}", start.order)
+            }
             Candidate::Delay {
                 start: DelayStart::DataSlope,
                 ..
@@ -131,30 +204,46 @@ impl Candidate {
             Candidate::Stiffness { f_hz, zeta } => {
                 augment::with_stiffness(model, *f_hz, zeta.clamp(1e-3, 0.9))
             }
-            Candidate::InputDynamics { inputs, poles } => {
-                dynamics(model, FactorTarget::Input, inputs, poles)
+            Candidate::InputDynamics { inputs, start } => {
+                dynamics(model, FactorTarget::Input, inputs, model.nu(), start)
             }
-            Candidate::OutputDynamics { outputs, poles } => {
-                dynamics(model, FactorTarget::Output, outputs, poles)
+            Candidate::OutputDynamics { outputs, start } => {
+                dynamics(model, FactorTarget::Output, outputs, model.ny(), start)
             }
+        }
+    }
+
+    /// True for a dynamics factor common to every entry.
+    pub fn is_common_factor(&self) -> bool {
+        match self {
+            Candidate::InputDynamics { inputs: v, .. }
+            | Candidate::OutputDynamics { outputs: v, .. } => v.len() > 1,
+            _ => false,
         }
     }
 }
 
-/// A first-order factor on the first of `which` (1-based) at the first of `poles`.
+/// The factor `start` on `which` (1-based, one of `n`; all `n` of them: the common
+/// factor).
 fn dynamics(
     model: &AdditiveModel,
     target: fn(usize) -> FactorTarget,
     which: &[usize],
-    poles: &[f64],
+    n: usize,
+    start: &FactorStart,
 ) -> Result<AdditiveModel, RivError> {
-    let (Some(index), Some(&pole)) = (which.first().and_then(|i| i.checked_sub(1)), poles.first())
-    else {
-        return Err(RivError::Structure(
-            "a dynamics candidate needs an input or output (1-based) and a pole".into(),
-        ));
+    let target = match which {
+        [i] if (1..=n).contains(i) => target(i - 1),
+        v if v.len() == n && (1..=n).all(|i| v.contains(&i)) => FactorTarget::All,
+        _ => {
+            return Err(RivError::Structure(format!(
+                "a dynamics candidate needs one input or output (1-based, of {n}) or all of them, got {which:?}"
+            )))
+        }
     };
-    augment::with_dynamics(model, target(index), 1, pole)
+    let mut m = model.clone();
+    m.push_dynamics(start.factor(target)?)?;
+    Ok(m)
 }
 
 /// The key of a missed mode at `f_hz` (its frequency to 0.1 Hz).
@@ -328,38 +417,99 @@ pub fn propose(
             );
         }
     }
+    propose_dynamics(model, an, alpha, &seen, &mut push);
+    out
+}
+
+/// The dynamics-factor candidates: the row or column whose factor (of the order its
+/// signature supports, [`validation::IoFactor::order`]) explains the most, and the
+/// factor common to every entry, proposed with it (the trial tests both supports and
+/// the refits' F tests decide) or on its own signature. A common factor is proposed as
+/// `input_dynamics` with every input.
+fn propose_dynamics(
+    model: &AdditiveModel,
+    an: &ResidualAnalysis,
+    alpha: f64,
+    seen: &dyn Fn(Effect, &str) -> bool,
+    push: &mut dyn FnMut(Candidate, String),
+) {
+    let c = an.significance.line_scale;
+    let band = (
+        an.freq_hz.first().copied().unwrap_or(0.0),
+        an.freq_hz.last().copied().unwrap_or(0.0),
+    );
+    let order_of = |f: &validation::IoFactor| f.order(c, alpha, band);
+    let explained = |f: &validation::IoFactor| match order_of(f) {
+        2 => f.second_order.fit.explained,
+        _ => f.fit.explained,
+    };
+    let supported = |f: &validation::IoFactor| match order_of(f) {
+        2 => plausible(&f.second_order.fit, alpha),
+        _ => plausible(&f.fit, alpha),
+    };
+    let describe = |f: &validation::IoFactor, on: String, start: &FactorStart| -> String {
+        let shape = if start.order == 2 {
+            format!(
+                "second order at {:.1} Hz, zeta {:.3} ({:.0}% of the excess; first order {:.0}%)",
+                start.f_hz,
+                start.zeta,
+                100.0 * f.second_order.fit.explained_fraction,
+                100.0 * f.fit.explained_fraction
+            )
+        } else {
+            format!(
+                "first order, corner {:.1} Hz ({:.0}% of the excess; second order {:.0}%)",
+                start.f_hz,
+                100.0 * f.fit.explained_fraction,
+                100.0 * f.second_order.fit.explained_fraction
+            )
+        };
+        format!(
+            "factor on {on}: {shape}; {:.0}% of the excess in that support",
+            100.0 * f.energy_fraction
+        )
+    };
+    let mut any_support = false;
     for (effect, list, input) in [
         (Effect::InputDynamics, &an.input_dynamics, true),
         (Effect::OutputDynamics, &an.output_dynamics, false),
     ] {
-        // the strongest row or column whose first-order factor is significant
+        // the strongest row or column whose factor is significant
         let best = list
             .iter()
-            .filter(|f| plausible(&f.fit, alpha))
-            .max_by(|a, b| a.fit.explained.total_cmp(&b.fit.explained));
-        if let Some(f) = best {
-            if seen(effect, &format!("{}", f.index)) {
-                continue;
+            .filter(|f| supported(f))
+            .max_by(|a, b| explained(a).total_cmp(&explained(b)));
+        let Some(f) = best else { continue };
+        any_support = true;
+        let start = FactorStart::from_signature(f, order_of(f));
+        let which = vec![f.index + 1];
+        let candidate = if input {
+            Candidate::InputDynamics {
+                inputs: which,
+                start,
             }
-            let pole = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
-                f.pole_hz
-            } else {
-                1e3
-            };
-            let (which, poles) = (vec![f.index + 1], vec![pole]);
-            let candidate = if input {
-                Candidate::InputDynamics {
-                    inputs: which,
-                    poles,
-                }
-            } else {
-                Candidate::OutputDynamics {
-                    outputs: which,
-                    poles,
-                }
-            };
-            push(candidate, detail(an, effect));
+        } else {
+            Candidate::OutputDynamics {
+                outputs: which,
+                start,
+            }
+        };
+        if seen(effect, &candidate.key()) {
+            continue;
+        }
+        let on = format!("{} {}", if input { "input" } else { "output" }, f.index + 1);
+        push(candidate, describe(f, on, &start));
+    }
+    let common = &an.common_dynamics;
+    if (any_support || supported(common)) && model.nu() > 1 {
+        let start = FactorStart::from_signature(common, order_of(common));
+        let candidate = Candidate::InputDynamics {
+            inputs: (1..=model.nu()).collect(),
+            start,
+        };
+        if !seen(Effect::InputDynamics, &candidate.key()) {
+            let ev = describe(common, "every entry (common to all inputs)".into(), &start);
+            push(candidate, ev);
         }
     }
-    out
 }

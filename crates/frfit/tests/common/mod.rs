@@ -126,6 +126,7 @@ pub fn simulated_wafer(periods: usize, realizations: usize, distortion: f64) -> 
         stochastic_distortion: distortion,
         delay_samples: stage.delay_samples,
         excited_inputs: None,
+        plant_dynamics: Vec::new(),
         seed: 3,
         keep_time_signals: false,
     };
