@@ -82,7 +82,7 @@ pub enum Candidate {
 }
 
 /// The order and starting pole of a dynamics-factor candidate.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FactorStart {
     /// 1: a lag `1 / (1 + s / w)`; 2: `w^2 / (s^2 + 2 zeta w s + w^2)`.
     pub order: usize,
@@ -90,6 +90,10 @@ pub struct FactorStart {
     pub f_hz: f64,
     /// Relative damping (order 2; ignored for order 1).
     pub zeta: f64,
+    /// Submodels (indices in the current model) the factor replaces: modes that live in
+    /// the factor's row or column alone, where the first fit took the factor's
+    /// resonance for a mode.
+    pub replaces: Vec<usize>,
 }
 
 impl FactorStart {
@@ -102,6 +106,7 @@ impl FactorStart {
                 order: 2,
                 f_hz: f.second_order.f_hz,
                 zeta: f.second_order.zeta.clamp(0.005, 1.0),
+                replaces: Vec::new(),
             }
         } else {
             let f_hz = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
@@ -113,6 +118,7 @@ impl FactorStart {
                 order: 1,
                 f_hz,
                 zeta: 1.0,
+                replaces: Vec::new(),
             }
         }
     }
@@ -179,7 +185,9 @@ impl Candidate {
                         .map(|i| format!("{}", i.saturating_sub(1)))
                         .unwrap_or_default()
                 };
-                format!("{which}:{}", start.order)
+                let replaced: Vec<String> =
+                    start.replaces.iter().map(|i| format!(":m{i}")).collect();
+                format!("{which}:{}{}", start.order, replaced.concat())
             }
             Candidate::Delay {
                 start: DelayStart::DataSlope,
@@ -242,8 +250,153 @@ fn dynamics(
         }
     };
     let mut m = model.clone();
+    let mut gone = start.replaces.clone();
+    gone.sort_unstable();
+    gone.dedup();
+    for &i in gone.iter().rev() {
+        if m.submodels.get(i).map(|s| s.kind) != Some(SubmodelKind::Mode) {
+            return Err(RivError::Structure(format!(
+                "submodel {i} that the factor would replace is not a mode"
+            )));
+        }
+        m.remove_submodel(i);
+    }
     m.push_dynamics(start.factor(target)?)?;
     Ok(m)
+}
+
+/// The share of each output row (`rows = true`) or input column of a submodel's
+/// numerator energy (all numerator matrices, in the scaled variable).
+fn numerator_shares(s: &additive_riv::Submodel, rows: bool) -> Vec<f64> {
+    let (ny, nu) = s
+        .num
+        .first()
+        .map(|b| (b.nrows(), b.ncols()))
+        .unwrap_or((0, 0));
+    let mut v = vec![0.0; if rows { ny } else { nu }];
+    for b in &s.num {
+        for j in 0..nu {
+            for i in 0..ny {
+                v[if rows { i } else { j }] += b[(i, j)].powi(2);
+            }
+        }
+    }
+    let t: f64 = v.iter().sum();
+    if t > 0.0 {
+        v.iter_mut().for_each(|x| *x /= t);
+    }
+    v
+}
+
+/// Second-order factor candidates from the model itself: a mode whose numerator lives
+/// in one output row (or one input column), at least `LOCAL_SHARE` of its energy, where
+/// the residual concentrates (the dominant row or column of the residual), is what a
+/// first fit makes of a sensor's (actuator's) mount resonance: the resonance seen in
+/// that row only. The candidate replaces that mode by a second-order factor on the
+/// row; its start is screened on a grid of frequencies around the mode's and of damping
+/// values by the cost after the numerator fit (eq. 24: the numerators are linear given
+/// the poles and the factor, so each grid point is one convex fit), and the refit and
+/// its F test decide between the mode and the factor. At most the two most local modes
+/// of the row are tried. `(row or column, start)` per candidate.
+fn local_modes(
+    model: &AdditiveModel,
+    an: &ResidualAnalysis,
+    fd: &FitData,
+    rows: bool,
+) -> Vec<(usize, FactorStart)> {
+    const LOCAL_SHARE: f64 = 0.8;
+    let n = if rows { model.ny() } else { model.nu() };
+    let dominant = if rows {
+        an.concentration.dominant_row
+    } else {
+        an.concentration.dominant_col
+    };
+    let Some(k) = dominant.filter(|_| n >= 2) else {
+        return Vec::new();
+    };
+    let mut local: Vec<(f64, usize, f64, f64)> = model
+        .modes()
+        .iter()
+        .filter(|m| m.zeta > 0.0)
+        .filter_map(|m| {
+            let share = numerator_shares(&model.submodels[m.submodel], rows)
+                .get(k)
+                .copied()
+                .unwrap_or(0.0);
+            (share >= LOCAL_SHARE).then_some((share, m.submodel, m.f_hz, m.zeta))
+        })
+        .collect();
+    local.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let target = if rows {
+        FactorTarget::Output(k)
+    } else {
+        FactorTarget::Input(k)
+    };
+    let mut out: Vec<(usize, FactorStart)> = Vec::new();
+    for &(_, sub, f, z) in local.iter().take(2) {
+        let mut base = model.clone();
+        base.remove_submodel(sub);
+        let Some((f_hz, zeta)) = screen_second_order(&base, target, f, z, fd) else {
+            continue;
+        };
+        // two modes of the row that screen to the same factor are one candidate
+        if out.iter().any(|(_, s)| (s.f_hz / f_hz - 1.0).abs() < 0.005) {
+            continue;
+        }
+        out.push((
+            k,
+            FactorStart {
+                order: 2,
+                f_hz,
+                zeta,
+                replaces: vec![sub],
+            },
+        ));
+    }
+    out
+}
+
+/// The start of a second-order factor on `target` added to `base`: the frequency and
+/// damping, on a grid of `f_hz` times 0.92..1.08 and damping 0.005..0.2 refined once
+/// around its best point, with the least cost after the numerator fit. `None` when no
+/// grid point could be fitted.
+fn screen_second_order(
+    base: &AdditiveModel,
+    target: FactorTarget,
+    f_hz: f64,
+    zeta: f64,
+    fd: &FitData,
+) -> Option<(f64, f64)> {
+    let cost = |f: f64, z: f64| -> f64 {
+        let mut m = base.clone();
+        if m.push_dynamics(DynamicsFactor::second_order(target, f, z))
+            .is_err()
+        {
+            return f64::INFINITY;
+        }
+        additive_riv::fit_numerators(&mut m, fd).unwrap_or(f64::INFINITY)
+    };
+    let mut best = (f64::INFINITY, f_hz, zeta.clamp(0.005, 0.2));
+    let (mut lf, mut lz) = (f_hz.ln(), best.2.ln());
+    let (mut hf, mut hz) = (0.08f64, (0.2f64 / 0.005).ln() / 2.0);
+    let (mut cf, mut cz) = (lf, (0.005f64 * 0.2).sqrt().ln());
+    for _ in 0..2 {
+        for a in -3..=3 {
+            for b in -2..=2 {
+                let f = (cf + hf * a as f64 / 3.0).exp();
+                let z = (cz + hz * b as f64 / 2.0).exp().clamp(0.002, 1.0);
+                let c = cost(f, z);
+                if c < best.0 {
+                    best = (c, f, z);
+                    (lf, lz) = (f.ln(), z.ln());
+                }
+            }
+        }
+        (cf, cz) = (lf, lz);
+        hf /= 3.0;
+        hz /= 2.0;
+    }
+    best.0.is_finite().then_some((best.1, best.2))
 }
 
 /// The key of a missed mode at `f_hz` (its frequency to 0.1 Hz).
@@ -417,7 +570,7 @@ pub fn propose(
             );
         }
     }
-    propose_dynamics(model, an, alpha, &seen, &mut push);
+    propose_dynamics(model, an, fd, alpha, &seen, &mut push);
     out
 }
 
@@ -429,6 +582,7 @@ pub fn propose(
 fn propose_dynamics(
     model: &AdditiveModel,
     an: &ResidualAnalysis,
+    fd: &FitData,
     alpha: f64,
     seen: &dyn Fn(Effect, &str) -> bool,
     push: &mut dyn FnMut(Candidate, String),
@@ -483,6 +637,8 @@ fn propose_dynamics(
         any_support = true;
         let start = FactorStart::from_signature(f, order_of(f));
         let which = vec![f.index + 1];
+        let on = format!("{} {}", if input { "input" } else { "output" }, f.index + 1);
+        let ev = describe(f, on, &start);
         let candidate = if input {
             Candidate::InputDynamics {
                 inputs: which,
@@ -497,18 +653,61 @@ fn propose_dynamics(
         if seen(effect, &candidate.key()) {
             continue;
         }
-        let on = format!("{} {}", if input { "input" } else { "output" }, f.index + 1);
-        push(candidate, describe(f, on, &start));
+        push(candidate, ev);
+    }
+    for (effect, input) in [
+        (Effect::InputDynamics, true),
+        (Effect::OutputDynamics, false),
+    ] {
+        for (k, start) in local_modes(model, an, fd, !input) {
+            let which = vec![k + 1];
+            let candidate = if input {
+                Candidate::InputDynamics {
+                    inputs: which,
+                    start: start.clone(),
+                }
+            } else {
+                Candidate::OutputDynamics {
+                    outputs: which,
+                    start: start.clone(),
+                }
+            };
+            if seen(effect, &candidate.key()) {
+                continue;
+            }
+            any_support = true;
+            let freqs: Vec<String> = start
+                .replaces
+                .iter()
+                .filter_map(|&i| model.submodels.get(i))
+                .filter_map(|s| model.upper_pole(s))
+                .map(|p| format!("{:.1} Hz", p.norm() / std::f64::consts::TAU))
+                .collect();
+            let (what, share) = if input {
+                ("input", an.concentration.col_fraction[k])
+            } else {
+                ("output", an.concentration.row_fraction[k])
+            };
+            let ev = format!(
+                "the mode at {} lives in {what} {} alone, where {:.0}% of the residual's excess is: a resonance of that {what}'s dynamics rather than of the structure? second-order factor in its place, started at {:.1} Hz, zeta {:.3} (screened by the numerator fit)",
+                freqs.join(", "),
+                k + 1,
+                100.0 * share,
+                start.f_hz,
+                start.zeta
+            );
+            push(candidate, ev);
+        }
     }
     let common = &an.common_dynamics;
     if (any_support || supported(common)) && model.nu() > 1 {
         let start = FactorStart::from_signature(common, order_of(common));
+        let ev = describe(common, "every entry (common to all inputs)".into(), &start);
         let candidate = Candidate::InputDynamics {
             inputs: (1..=model.nu()).collect(),
             start,
         };
         if !seen(Effect::InputDynamics, &candidate.key()) {
-            let ev = describe(common, "every entry (common to all inputs)".into(), &start);
             push(candidate, ev);
         }
     }
