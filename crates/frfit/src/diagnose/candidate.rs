@@ -339,8 +339,9 @@ fn local_modes(
         let Some((f_hz, zeta)) = screen_second_order(&base, target, f, z, fd) else {
             continue;
         };
-        // two modes of the row that screen to the same factor are one candidate
-        if out.iter().any(|(_, s)| (s.f_hz / f_hz - 1.0).abs() < 0.005) {
+        // two modes of the row that screen to nearly the same factor (a resonance the
+        // first fit split in two) are one candidate
+        if out.iter().any(|(_, s)| (s.f_hz / f_hz - 1.0).abs() < 0.05) {
             continue;
         }
         out.push((
