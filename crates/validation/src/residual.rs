@@ -1058,11 +1058,14 @@ pub fn analyze_residual(
             });
         }
     }
+    // a factor common to every entry is flagged only when it explains more than a delay
+    // (its magnitude, unlike a delay's, changes over the band)
     evidence.push(EffectEvidence {
         effect: Effect::InputDynamics,
         explained_fraction: best_of(&common_dynamics),
-        significant: common_dynamics.fit.significant
-            || common_dynamics.second_order.fit.significant,
+        significant: (common_dynamics.fit.significant
+            || common_dynamics.second_order.fit.significant)
+            && best_of(&common_dynamics) > phase_trend.fit.explained_fraction,
         detail: io_detail(&common_dynamics, "every entry".into()),
     });
     evidence.sort_by(|a, b| {

@@ -690,18 +690,23 @@ pub struct IoFactor {
 }
 
 impl IoFactor {
-    /// The order the residual supports, 1 or 2: 2 when the second-order template
-    /// explains significantly more than the first-order one (the extra parameter's
-    /// explained energy over the calibrated scale beyond the `chi2(1)` quantile at
-    /// `alpha`, with `c` the per-line scale of [`crate::Residual::line_null`]) and has
-    /// its natural frequency inside `[f_lo / 2, 2 f_hi]` (beyond it, the second-order
-    /// template only bends the first-order one's phase slope).
+    /// The order the residual supports, 1 or 2: 2 for a resonance, when the
+    /// second-order template is underdamped (`zeta <= 0.5`: complex poles; an overdamped
+    /// one is a first-order lag with a far pole added), has its natural frequency inside
+    /// `[f_lo / 2, 2 f_hi]` (beyond it, the template only bends the first-order one's
+    /// phase slope) and explains significantly more than the first-order one: its extra
+    /// parameter's explained energy over the calibrated scale `c` (the per-line scale of
+    /// [`crate::Residual::line_null`]) beyond the `chi2(1)` quantile at `alpha`, and at
+    /// least 5 % more of the excess (a first fit that absorbed part of a lag leaves a
+    /// residual that no template fits exactly, and a second parameter always takes some
+    /// of it).
     pub fn order(&self, c: f64, alpha: f64, band_hz: (f64, f64)) -> usize {
-        let gain =
-            (self.second_order.fit.explained - self.fit.explained) / c.max(f64::MIN_POSITIVE);
-        let inside =
-            self.second_order.f_hz >= 0.5 * band_hz.0 && self.second_order.f_hz <= 2.0 * band_hz.1;
-        if inside && gain > crate::stats::chi2_isf(alpha, 1.0) {
+        let so = &self.second_order;
+        let gain = (so.fit.explained - self.fit.explained) / c.max(f64::MIN_POSITIVE);
+        let inside = so.f_hz >= 0.5 * band_hz.0 && so.f_hz <= 2.0 * band_hz.1;
+        let resonant = so.zeta <= 0.5;
+        let more = so.fit.explained_fraction - self.fit.explained_fraction >= 0.05;
+        if inside && resonant && more && gain > crate::stats::chi2_isf(alpha, 1.0) {
             2
         } else {
             1

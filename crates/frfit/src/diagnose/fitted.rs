@@ -228,10 +228,13 @@ fn root_params(p: &realize::C64) -> PoleParams {
 }
 
 /// The poles and zeros of the newest dynamics factor of `m` (the candidate's; one of
-/// each complex pair, the upper), or the starting pole when it has none.
+/// each complex pair, the upper; lowest frequency first), or the starting pole when it has none.
 fn fitted_roots(m: &AdditiveModel, start: &FactorStart) -> (Vec<PoleParams>, Vec<PoleParams>) {
+    // lowest frequency first: the factor's corner, then any far pole
     let upper = |v: Vec<realize::C64>| -> Vec<PoleParams> {
-        v.iter().filter(|p| p.im >= 0.0).map(root_params).collect()
+        let mut r: Vec<PoleParams> = v.iter().filter(|p| p.im >= 0.0).map(root_params).collect();
+        r.sort_by(|a, b| a.f_hz.total_cmp(&b.f_hz));
+        r
     };
     match m.dynamics.last() {
         Some(d) => (upper(d.poles()), upper(d.zeros())),
