@@ -25,7 +25,7 @@ mod candidate;
 mod fitted;
 mod trial;
 
-pub use candidate::{Candidate, DelayStart, Proposal};
+pub use candidate::{Candidate, DelayStart, FactorStart, Proposal};
 pub use fitted::{FittedEffect, PoleParams, Refit};
 
 use crate::pipeline::{err, error_stats, FitContext, PipelineConfig};
