@@ -74,7 +74,7 @@ pub use residual::{
     TrendClass,
 };
 pub use signatures::{
-    feedthrough_signature, hold_signature, io_factors, mode_signature, phase_trend, residual_peaks,
-    stiffness_signature, FeedthroughSignature, HoldSignature, IoFactor, PhaseTrend, ResidualPeak,
-    StiffnessSignature, TemplateFit,
+    common_factor, feedthrough_signature, hold_signature, io_factors, mode_signature, phase_trend,
+    residual_peaks, stiffness_signature, FeedthroughSignature, HoldSignature, IoFactor, PhaseTrend,
+    ResidualPeak, SecondOrderFactor, StiffnessSignature, TemplateFit,
 };

@@ -65,7 +65,7 @@
 
 use crate::noise::{NoiseLevel, NoiseSource};
 use crate::signatures::{
-    feedthrough_signature, hold_signature, io_factors, phase_trend, residual_peaks,
+    common_factor, feedthrough_signature, hold_signature, io_factors, phase_trend, residual_peaks,
     stiffness_signature, FeedthroughSignature, HoldSignature, IoFactor, PhaseTrend, ResidualPeak,
     StiffnessSignature,
 };
@@ -442,6 +442,8 @@ pub struct ResidualAnalysis {
     pub input_dynamics: Vec<IoFactor>,
     /// First-order factor per output row (sensor dynamics).
     pub output_dynamics: Vec<IoFactor>,
+    /// A factor common to every entry (an amplifier's or the sensors' bandwidth).
+    pub common_dynamics: IoFactor,
     /// Every effect's evidence, largest explained fraction first.
     pub evidence: Vec<EffectEvidence>,
 }
@@ -940,6 +942,7 @@ pub fn analyze_residual(
     let feedthrough = feedthrough_signature(&res);
     let stiffness = stiffness_signature(&res);
     let (input_dynamics, output_dynamics) = io_factors(&res, &concentration);
+    let common_dynamics = common_factor(&res);
     let mut evidence = Vec::new();
     if let Some(best) = residual_cmif.iter().find(|p| p.significant) {
         let sig_peaks: Vec<&ResidualPeak> =
@@ -1023,31 +1026,48 @@ pub fn analyze_residual(
             stiffness.f_hz, stiffness.zeta
         ),
     });
+    let io_detail = |f: &IoFactor, on: String| -> String {
+        format!(
+            "factor on {on}: first order tau {:.3e} s (pole {:.1} Hz, {:.0} % of the excess); \
+             second order {:.1} Hz, zeta {:.3} ({:.0} % of the excess); {:.0} % of the excess \
+             in that support",
+            f.tau_s,
+            f.pole_hz,
+            100.0 * f.fit.explained_fraction,
+            f.second_order.f_hz,
+            f.second_order.zeta,
+            100.0 * f.second_order.fit.explained_fraction,
+            100.0 * f.energy_fraction,
+        )
+    };
+    let best_of = |f: &IoFactor| {
+        f.fit
+            .explained_fraction
+            .max(f.second_order.fit.explained_fraction)
+    };
     for (kind, list, what) in [
         (Effect::InputDynamics, &input_dynamics, "input"),
         (Effect::OutputDynamics, &output_dynamics, "output"),
     ] {
-        if let Some(best) = list.iter().max_by(|a, b| {
-            a.fit
-                .explained_fraction
-                .total_cmp(&b.fit.explained_fraction)
-        }) {
+        if let Some(best) = list.iter().max_by(|a, b| best_of(a).total_cmp(&best_of(b))) {
             evidence.push(EffectEvidence {
                 effect: kind,
-                explained_fraction: best.fit.explained_fraction,
-                significant: best.fit.significant,
-                detail: format!(
-                    "first-order factor on {what} {}: tau {:.3e} s (pole {:.1} Hz), {:.0} % of \
-                     the excess in that {}",
-                    best.index + 1,
-                    best.tau_s,
-                    best.pole_hz,
-                    100.0 * best.energy_fraction,
-                    if what == "input" { "column" } else { "row" }
-                ),
+                explained_fraction: best_of(best),
+                significant: best.fit.significant || best.second_order.fit.significant,
+                detail: io_detail(best, format!("{what} {}", best.index + 1)),
             });
         }
     }
+    // a factor common to every entry is flagged only when it explains more than a delay
+    // (its magnitude, unlike a delay's, changes over the band)
+    evidence.push(EffectEvidence {
+        effect: Effect::InputDynamics,
+        explained_fraction: best_of(&common_dynamics),
+        significant: (common_dynamics.fit.significant
+            || common_dynamics.second_order.fit.significant)
+            && best_of(&common_dynamics) > phase_trend.fit.explained_fraction,
+        detail: io_detail(&common_dynamics, "every entry".into()),
+    });
     evidence.sort_by(|a, b| {
         b.significant
             .cmp(&a.significant)
@@ -1075,6 +1095,7 @@ pub fn analyze_residual(
         stiffness,
         input_dynamics,
         output_dynamics,
+        common_dynamics,
         evidence,
     })
 }

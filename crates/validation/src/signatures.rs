@@ -11,6 +11,8 @@
 //! | stiffness instead of a free rigid body | `P_rb (s^2 / (s^2 + 2 zeta w0 s + w0^2) - 1)`, `~ (w0 / w)^2 P_rb` | [`stiffness_signature`]: gain per entry, common `w0`, `zeta` |
 //! | first-order actuator on input `j` | column `j`: `P_:j (1 / (1 + j w tau) - 1)` | [`io_factors`]: `tau` per column |
 //! | first-order sensor on output `i` | row `i`: `P_i: (1 / (1 + j w tau) - 1)` | [`io_factors`]: `tau` per row |
+//! | second-order (mount resonance) on a row or column | `P_i: (w0^2 / (s^2 + 2 zeta w0 s + w0^2) - 1)` | [`io_factors`]: `w0`, `zeta` per row and column |
+//! | a factor common to every entry (amplifier bandwidth) | `P (h(j w) - 1)` | [`common_factor`]: first and second order |
 //! | missed mode | a resonance `c b^T / (s^2 + 2 zeta w s + w^2)` | [`residual_peaks`]: CMIF peaks of the whitened residual |
 //!
 //! **Units and tests.** Every fit is a weighted least-squares fit with the inverse noise
@@ -644,13 +646,30 @@ fn golden_max(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, iters: usiz
     }
 }
 
-/// The signature of a first-order factor common to one input column (actuator
-/// dynamics) or one output row (sensor dynamics).
+/// The second-order template of a dynamics factor: `w0^2 / (s^2 + 2 zeta w0 s + w0^2)`
+/// (a mount resonance, or a second-order low-pass), fitted to one support.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SecondOrderFactor {
+    /// Natural frequency `w0 / 2 pi`, Hz.
+    #[serde(with = "crate::serde_f64")]
+    pub f_hz: f64,
+    /// Relative damping `zeta`.
+    #[serde(with = "crate::serde_f64")]
+    pub zeta: f64,
+    /// The fit (2 parameters; p-value Bonferroni-corrected like the first-order one).
+    pub fit: TemplateFit,
+}
+
+/// The signature of a dynamics factor of unit static gain common to one input column
+/// (actuator dynamics), one output row (sensor dynamics) or every entry (an amplifier
+/// or sensor bandwidth shared by all channels): the first-order template and the
+/// second-order one, each fitted to the residual of that support.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct IoFactor {
-    /// The column (input) or row (output), 0-based.
+    /// The column (input) or row (output), 0-based; 0 for the common factor.
     pub index: usize,
-    /// Its share of the residual's excess energy (from [`crate::Concentration`]).
+    /// Its share of the residual's excess energy (from [`crate::Concentration`]; 1 for
+    /// the common factor).
     pub energy_fraction: f64,
     /// Time constant `tau` of the factor `1 / (1 + j w tau)`, seconds; negative for a
     /// lead (or when the model has too much lag).
@@ -661,61 +680,213 @@ pub struct IoFactor {
     /// `1 / (2 pi |tau|)`, Hz.
     #[serde(with = "crate::serde_f64")]
     pub pole_hz: f64,
-    /// The fit (1 parameter; p-value Bonferroni-corrected over the rows or columns).
-    /// Flagged only for the dominant row or column of [`crate::Concentration`].
+    /// The first-order fit (1 parameter; p-value Bonferroni-corrected over the rows or
+    /// columns). For a row or column, flagged only for the dominant row or column of
+    /// [`crate::Concentration`].
     pub fit: TemplateFit,
+    /// The second-order template `w0^2 / (s^2 + 2 zeta w0 s + w0^2)` on the same
+    /// support (flagged under the same conditions as `fit`).
+    pub second_order: SecondOrderFactor,
 }
 
-/// Tests every input column and every output row for a first-order factor the model
-/// lacks: for column `j`, `E_:j = P_:j (1 / (1 + j w tau) - 1)` (an actuator's
-/// bandwidth), for row `i` the same with `P_i:` (a sensor's). `tau` is fitted by
-/// Gauss-Newton on the exact factor from the small-`tau` estimate (a factor
-/// `~ 1 - j w tau` at low frequency, a delay on that column alone). A factor common to
-/// all columns (a delay) explains about `1 / nu` of the excess in each column, so a
-/// column is flagged only when it is the dominant column of `conc` and its factor
-/// explains `min_explained` of the **total** excess. Returns (columns, rows).
+impl IoFactor {
+    /// The order the residual supports, 1 or 2: 2 for a resonance, when the
+    /// second-order template is underdamped (`zeta <= 0.5`: complex poles; an overdamped
+    /// one is a first-order lag with a far pole added), has its natural frequency inside
+    /// `[f_lo / 2, 2 f_hi]` (beyond it, the template only bends the first-order one's
+    /// phase slope) and explains significantly more than the first-order one: its extra
+    /// parameter's explained energy over the calibrated scale `c` (the per-line scale of
+    /// [`crate::Residual::line_null`]) beyond the `chi2(1)` quantile at `alpha`, and at
+    /// least 5 % more of the excess (a first fit that absorbed part of a lag leaves a
+    /// residual that no template fits exactly, and a second parameter always takes some
+    /// of it).
+    pub fn order(&self, c: f64, alpha: f64, band_hz: (f64, f64)) -> usize {
+        let so = &self.second_order;
+        let gain = (so.fit.explained - self.fit.explained) / c.max(f64::MIN_POSITIVE);
+        let inside = so.f_hz >= 0.5 * band_hz.0 && so.f_hz <= 2.0 * band_hz.1;
+        let resonant = so.zeta <= 0.5;
+        let more = so.fit.explained_fraction - self.fit.explained_fraction >= 0.05;
+        if inside && resonant && more && gain > crate::stats::chi2_isf(alpha, 1.0) {
+            2
+        } else {
+            1
+        }
+    }
+}
+
+/// `w0^2 / (w0^2 - w^2 + 2 j zeta w0 w) - 1` with `w0 = 2 pi f0`.
+#[inline]
+fn second_order_g(w: f64, f0: f64, zeta: f64) -> C64 {
+    let w0 = TAU * f0;
+    C64::new(w0 * w0, 0.0) / C64::new(w0 * w0 - w * w, 2.0 * zeta * w0 * w) - 1.0
+}
+
+/// Explained energy `sum_k 2 Re(conj(g_k) B_k) - |g_k|^2 A_k` of a per-line factor.
+fn explained_by(omega: &[f64], a: &[f64], b: &[C64], g: impl Fn(f64) -> C64) -> f64 {
+    omega
+        .iter()
+        .zip(a.iter().zip(b))
+        .map(|(&w, (&ak, bk))| {
+            let gk = g(w);
+            2.0 * (gk.conj() * bk).re - gk.norm_sqr() * ak
+        })
+        .sum()
+}
+
+/// Fits the second-order template to the per-line sums: a grid over the natural
+/// frequency (48 points per decade-spaced span from a fifth of the lowest line to five
+/// times the highest) and the damping (0.005 to 1, 10 values), then alternating
+/// golden-section refinements of `log f0` and `log zeta` around the best grid point.
+/// Returns `(f0, zeta, explained)`.
+fn fit_second_order(omega: &[f64], a: &[f64], b: &[C64]) -> (f64, f64, f64) {
+    let (Some(&w_lo), Some(&w_hi)) = (
+        omega.iter().find(|w| **w > 0.0),
+        omega.iter().rev().find(|w| **w > 0.0),
+    ) else {
+        return (f64::NAN, f64::NAN, 0.0);
+    };
+    let (lf_lo, lf_hi) = ((0.2 * w_lo / TAU).log10(), (5.0 * w_hi / TAU).log10());
+    let n_f = (((lf_hi - lf_lo) * 48.0).ceil() as usize).clamp(8, 400);
+    let zetas: [f64; 10] = [0.005, 0.01, 0.02, 0.035, 0.06, 0.1, 0.2, 0.35, 0.6, 1.0];
+    let ev = |lf: f64, lz: f64| {
+        let (f0, z) = (10f64.powf(lf), 10f64.powf(lz));
+        explained_by(omega, a, b, |w| second_order_g(w, f0, z))
+    };
+    let (mut best_lf, mut best_lz, mut best) = (lf_lo, 0.0, f64::NEG_INFINITY);
+    for i in 0..n_f {
+        let lf = lf_lo + (lf_hi - lf_lo) * i as f64 / (n_f - 1) as f64;
+        for z in zetas {
+            let v = ev(lf, z.log10());
+            if v > best {
+                (best_lf, best_lz, best) = (lf, z.log10(), v);
+            }
+        }
+    }
+    let step_f = (lf_hi - lf_lo) / (n_f - 1) as f64;
+    let (mut hf, mut hz) = (step_f, 0.25);
+    for _ in 0..4 {
+        best_lf = golden_max(|lf| ev(lf, best_lz), best_lf - hf, best_lf + hf, 25);
+        best_lz = golden_max(
+            |lz| ev(best_lf, lz),
+            (best_lz - hz).max(-3.0),
+            (best_lz + hz).min(0.3),
+            25,
+        );
+        hf *= 0.5;
+        hz *= 0.5;
+    }
+    let v = ev(best_lf, best_lz);
+    if v >= best {
+        (10f64.powf(best_lf), 10f64.powf(best_lz), v)
+    } else {
+        // the grid point stays the estimate when the refinement found nothing better
+        (10f64.powf(best_lf), 10f64.powf(best_lz), best)
+    }
+}
+
+/// The first- and second-order templates of a factor on the entries `sel` (see
+/// [`IoFactor`]), with the p-values corrected for `n_cand` supports.
+fn factor_on(
+    res: &Residual,
+    sel: impl Fn(usize) -> bool,
+    n_cand: usize,
+) -> (FactorFit, SecondOrderFactor) {
+    let (c, _) = res.line_null();
+    let (a, b) = line_sums(res, sel);
+    let f = fit_factor(&res.omega, &a, &b, Factor::FirstOrder, c);
+    let (f0, zeta, explained) = fit_second_order(&res.omega, &a, &b);
+    let second = SecondOrderFactor {
+        f_hz: f0,
+        zeta,
+        fit: TemplateFit::new(res, explained, 2, n_cand),
+    };
+    (f, second)
+}
+
+fn io_factor(
+    res: &Residual,
+    index: usize,
+    energy_fraction: f64,
+    (f, second): (FactorFit, SecondOrderFactor),
+    n_cand: usize,
+    flaggable: bool,
+) -> IoFactor {
+    let mut fit = TemplateFit::new(res, f.explained, 1, n_cand);
+    fit.significant &= flaggable;
+    let mut second = second;
+    second.fit.significant &= flaggable;
+    IoFactor {
+        index,
+        energy_fraction,
+        tau_s: f.theta,
+        tau_std_s: f.std,
+        pole_hz: if f.theta != 0.0 {
+            1.0 / (TAU * f.theta.abs())
+        } else {
+            f64::INFINITY
+        },
+        fit,
+        second_order: second,
+    }
+}
+
+/// Tests every input column and every output row for a factor the model lacks: for
+/// column `j`, `E_:j = P_:j (h(j w) - 1)` (an actuator's bandwidth or mount resonance),
+/// for row `i` the same with `P_i:` (a sensor's), with `h` the first-order lag
+/// `1 / (1 + j w tau)` and, separately, the second-order `w0^2 / (s^2 + 2 zeta w0 s +
+/// w0^2)`. `tau` is fitted by Gauss-Newton on the exact factor from the small-`tau`
+/// estimate (a factor `~ 1 - j w tau` at low frequency, a delay on that column alone);
+/// `w0` and `zeta` by a grid and golden-section refinement. A factor common to all
+/// columns (a delay) explains about `1 / nu` of the excess in each column, so a column
+/// is flagged only when it is the dominant column of `conc` and its factor explains
+/// `min_explained` of the **total** excess. Returns (columns, rows).
+///
+/// A second-order factor on one row differs from a missed mode in the residual's
+/// structure: it multiplies the whole row (every mode and the rigid body, seen through a
+/// resonance) and leaves the other rows untouched, while a mode adds a rank-one term to
+/// every entry with its mode shape; the concentration in that row proposes the support.
 pub fn io_factors(
     res: &Residual,
     conc: &crate::residual::Concentration,
 ) -> (Vec<IoFactor>, Vec<IoFactor>) {
     let (ny, nu) = (res.ny, res.nu);
-    let (c, _) = res.line_null();
-    let one = |index: usize, col: bool| -> IoFactor {
-        let (a, b) = if col {
-            line_sums(res, |e| e / ny == index)
-        } else {
-            line_sums(res, |e| e % ny == index)
-        };
-        let f = fit_factor(&res.omega, &a, &b, Factor::FirstOrder, c);
-        let n_cand = if col { nu } else { ny };
-        let mut fit = TemplateFit::new(res, f.explained, 1, n_cand);
-        let dominant = if col {
-            conc.dominant_col == Some(index)
-        } else {
-            conc.dominant_row == Some(index)
-        };
-        fit.significant &= dominant;
-        IoFactor {
-            index,
-            energy_fraction: if col {
-                conc.col_fraction[index]
-            } else {
-                conc.row_fraction[index]
-            },
-            tau_s: f.theta,
-            tau_std_s: f.std,
-            pole_hz: if f.theta != 0.0 {
-                1.0 / (TAU * f.theta.abs())
-            } else {
-                f64::INFINITY
-            },
-            fit,
-        }
-    };
-    (
-        (0..nu).map(|j| one(j, true)).collect(),
-        (0..ny).map(|i| one(i, false)).collect(),
-    )
+    let cols = (0..nu)
+        .map(|j| {
+            let fits = factor_on(res, |e| e / ny == j, nu);
+            io_factor(
+                res,
+                j,
+                conc.col_fraction[j],
+                fits,
+                nu,
+                conc.dominant_col == Some(j),
+            )
+        })
+        .collect();
+    let rows = (0..ny)
+        .map(|i| {
+            let fits = factor_on(res, |e| e % ny == i, ny);
+            io_factor(
+                res,
+                i,
+                conc.row_fraction[i],
+                fits,
+                ny,
+                conc.dominant_row == Some(i),
+            )
+        })
+        .collect();
+    (cols, rows)
+}
+
+/// Tests the residual for a factor common to every entry (the bandwidth of an amplifier
+/// that drives all actuators, or of the sensor electronics): `E = P (h(j w) - 1)` over
+/// all entries, with the first- and second-order templates of [`io_factors`]. Unlike a
+/// delay (`e^{-j w d}`, unit magnitude), a lag also lowers the magnitude,
+/// `|h|^2 = 1 / (1 + (w tau)^2)`. Flagged as described in the module documentation.
+pub fn common_factor(res: &Residual) -> IoFactor {
+    let fits = factor_on(res, |_| true, 1);
+    io_factor(res, 0, 1.0, fits, 1, true)
 }
 
 /// A peak of the CMIF of the noise-whitened residual: where the model may miss a mode.

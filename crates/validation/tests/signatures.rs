@@ -378,6 +378,95 @@ fn sensor_signature() {
     }
 }
 
+/// `G` with `factor(f)` on the entries `on(i, j)` selects.
+fn with_dynamics(
+    p: &ResponseGrid,
+    f: &[f64],
+    on: impl Fn(usize, usize) -> bool,
+    factor: impl Fn(f64) -> C64,
+) -> ResponseGrid {
+    let mut g = p.clone();
+    for (k, &fk) in f.iter().enumerate() {
+        let h = factor(fk);
+        for e in 0..NY * NU {
+            if on(e % NY, e / NY) {
+                g.values[k * NY * NU + e] *= h;
+            }
+        }
+    }
+    g
+}
+
+/// A first-order lag common to every entry (an amplifier's bandwidth): the common
+/// factor's template finds its corner and explains more than the delay template.
+#[test]
+fn common_lag_signature() {
+    let f = freqs();
+    let p = response(&nominal(), &f);
+    let pole = 700.0;
+    let g = with_dynamics(&p, &f, |_, _| true, |fk| C64::new(1.0, fk / pole).inv());
+    for kind in [Noise::Exact, Noise::Measured] {
+        let a = analyze(&noisy(&f, &g, kind, 83), &p, &cfg());
+        summary(&format!("common lag at {pole} Hz, {kind:?}"), &a);
+        let c = &a.common_dynamics;
+        assert!((c.pole_hz / pole - 1.0).abs() < 0.02, "{}", c.pole_hz);
+        assert!(c.fit.significant);
+        assert!(c.fit.explained_fraction > 0.95);
+        assert!(c.fit.explained_fraction > a.phase_trend.fit.explained_fraction);
+        assert_eq!(flagged(&a)[0], Effect::InputDynamics);
+        let band = (f[0], f[f.len() - 1]);
+        assert_eq!(c.order(a.significance.line_scale, 0.01, band), 1);
+    }
+}
+
+/// A sensor-mount resonance `w^2 / (s^2 + 2 zeta w s + w^2)` on one output row, inside
+/// the band and above it: the row's second-order template finds its frequency and
+/// damping, and the order test prefers it to the first-order lag.
+#[test]
+fn second_order_sensor_signature() {
+    let f = freqs();
+    let p = response(&nominal(), &f);
+    let row = 2;
+    for (f0, zeta) in [(420.0, 0.03), (1400.0, 0.05)] {
+        let g = with_dynamics(
+            &p,
+            &f,
+            |i, _| i == row,
+            |fk| {
+                let x = fk / f0;
+                C64::new(1.0 - x * x, 2.0 * zeta * x).inv()
+            },
+        );
+        for kind in [Noise::Exact, Noise::Measured] {
+            let a = analyze(&noisy(&f, &g, kind, 97), &p, &cfg());
+            summary(
+                &format!(
+                    "resonance {f0} Hz zeta {zeta} on output {}, {kind:?}",
+                    row + 1
+                ),
+                &a,
+            );
+            let io = &a.output_dynamics[row];
+            let so = &io.second_order;
+            println!(
+                "    second order {:.2} Hz zeta {:.4}, explains {:.3} (first order {:.3})",
+                so.f_hz, so.zeta, so.fit.explained_fraction, io.fit.explained_fraction
+            );
+            assert_eq!(a.concentration.dominant_row, Some(row));
+            assert!((so.f_hz / f0 - 1.0).abs() < 0.01, "{}", so.f_hz);
+            assert!((so.zeta / zeta - 1.0).abs() < 0.1, "{}", so.zeta);
+            assert!(so.fit.significant);
+            let band = (f[0], f[f.len() - 1]);
+            assert_eq!(io.order(a.significance.line_scale, 0.01, band), 2);
+            assert!(a
+                .output_dynamics
+                .iter()
+                .filter(|x| x.index != row)
+                .all(|x| !x.fit.significant && !x.second_order.fit.significant));
+        }
+    }
+}
+
 #[test]
 fn stiffness_signature() {
     let f = freqs();

@@ -86,6 +86,16 @@ pub struct ExperimentConfig {
     pub delay_samples: f64,
     /// The input excited by each experiment; `None`: experiment `e` excites input `e`.
     pub excited_inputs: Option<Vec<usize>>,
+    /// Dynamics the plant has and its model is not told of (frequency-domain path only;
+    /// default none): rational factors of unit static gain
+    /// ([`realize::DynamicsFactor`]) on one input column (an actuator), one output row
+    /// (a sensor or its mount) or every entry (an amplifier's bandwidth). Each multiplies
+    /// the sampled plant at every line by its value at `s = j w` of the line, which is
+    /// how the fitted model applies a factor (`frfit`'s `input_dynamics` and
+    /// `output_dynamics`), so the noiseless response ([`ClosedLoopExperiment::true_frf`])
+    /// holds them exactly. The closed-loop stability check is of the plant without them:
+    /// keep their poles well above the rigid-body loop's bandwidth.
+    pub plant_dynamics: Vec<realize::DynamicsFactor>,
     /// Seed of the phases and noise.
     pub seed: u64,
     /// Keep the time records (time-domain path only).
@@ -109,12 +119,13 @@ impl ExperimentConfig {
             stochastic_distortion: 0.0,
             delay_samples: 1.0,
             excited_inputs: None,
+            plant_dynamics: Vec::new(),
             seed,
             keep_time_signals: false,
         }
     }
 
-    fn validate(&self, nu: usize) -> Result<Vec<usize>, FrfError> {
+    fn validate(&self, ny: usize, nu: usize) -> Result<Vec<usize>, FrfError> {
         if self.periods < 1 {
             return Err(FrfError::invalid(
                 "periods",
@@ -153,6 +164,36 @@ impl ExperimentConfig {
                 self.stochastic_distortion,
                 "must be finite and >= 0",
             ));
+        }
+        for (k, d) in self.plant_dynamics.iter().enumerate() {
+            let what = format!("plant_dynamics[{k}]");
+            let (index, n) = match d.target {
+                realize::FactorTarget::Input(j) => (j, nu),
+                realize::FactorTarget::Output(i) => (i, ny),
+                realize::FactorTarget::All => (0, 1),
+            };
+            if index >= n {
+                return Err(FrfError::invalid(
+                    what,
+                    index,
+                    format!("the plant has {ny} outputs and {nu} inputs (0-based indices)"),
+                ));
+            }
+            let finite = d.den.iter().chain(&d.num).all(|c| c.is_finite());
+            if !(finite && d.scale.is_finite() && d.scale > 0.0) {
+                return Err(FrfError::invalid(
+                    what,
+                    format!("den {:?}, num {:?}, scale {}", d.den, d.num, d.scale),
+                    "coefficients must be finite and the scale > 0",
+                ));
+            }
+            if d.den.is_empty() || !d.is_stable() {
+                return Err(FrfError::invalid(
+                    what,
+                    format!("poles {:?} rad/s", d.poles()),
+                    "a factor needs a stable denominator (every pole in the left half-plane)",
+                ));
+            }
         }
         if !(self.delay_samples.is_finite() && self.delay_samples >= 0.0) {
             return Err(FrfError::invalid(
@@ -213,6 +254,30 @@ pub struct ClosedLoopExperiment {
     all_bins: Option<AllBins>,
 }
 
+/// Multiplies the plant response `p` (`ny x nu` column-major per line of `freq_hz`) by
+/// the dynamics factors `dynamics`, each at `s = j 2 pi f` of the line, on the entries
+/// it targets (see [`ExperimentConfig::plant_dynamics`]).
+fn apply_dynamics(
+    dynamics: &[realize::DynamicsFactor],
+    freq_hz: &[f64],
+    ny: usize,
+    nu: usize,
+    p: &mut [C64],
+) {
+    for d in dynamics {
+        for (k, f) in freq_hz.iter().enumerate() {
+            let g = d.at(std::f64::consts::TAU * f);
+            for j in 0..nu {
+                for i in 0..ny {
+                    if d.affects(i, j) {
+                        p[k * ny * nu + j * ny + i] *= g;
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// `M = (I + P K)^-1` and `K M` from `vec(P)` (`ny x nu`) and `vec(K)` (`nu x ny`).
 fn loop_maps(p: &[C64], k: &[C64], ny: usize, nu: usize) -> Option<(Vec<C64>, Vec<C64>)> {
     let mut ipk = vec![C64::new(0.0, 0.0); ny * ny];
@@ -267,13 +332,14 @@ impl ClosedLoopExperiment {
                 format!("differs from the experiment's {} Hz", config.grid.fs()),
             ));
         }
-        let inputs = config.validate(nu)?;
+        let inputs = config.validate(ny, nu)?;
         let fs = config.grid.fs();
         let spectral_radius =
             closed_loop_spectral_radius(&plant, &controller, fs, config.delay_samples)?;
         let freq_hz = config.grid.freq_hz();
         let grid = plant.sampled_response(&freq_hz, fs, config.delay_samples)?;
-        let p_lines = grid.values;
+        let mut p_lines = grid.values;
+        apply_dynamics(&config.plant_dynamics, &freq_hz, ny, nu, &mut p_lines);
         let n = freq_hz.len();
         let mut km_lines = vec![C64::new(0.0, 0.0); n * nu * ny];
         let mut kbuf = vec![C64::new(0.0, 0.0); nu * ny];
@@ -292,9 +358,10 @@ impl ClosedLoopExperiment {
             let nb = period.div_ceil(2) - 1; // bins 1..=nb are strictly below N/2
             let df = config.grid.df();
             let f_all: Vec<f64> = (1..=nb).map(|b| b as f64 * df).collect();
-            let p = plant
+            let mut p = plant
                 .sampled_response(&f_all, fs, config.delay_samples)?
                 .values;
+            apply_dynamics(&config.plant_dynamics, &f_all, ny, nu, &mut p);
             let mut km = vec![C64::new(0.0, 0.0); nb * nu * ny];
             for b in 0..nb {
                 controller.response_into(f_all[b], &mut kbuf);
@@ -797,6 +864,13 @@ impl ClosedLoopExperiment {
                 "stochastic_distortion",
                 cfg.stochastic_distortion,
                 "is simulated on the frequency-domain path only",
+            ));
+        }
+        if !cfg.plant_dynamics.is_empty() {
+            return Err(FrfError::invalid(
+                "plant_dynamics",
+                cfg.plant_dynamics.len(),
+                "undeclared dynamics factors are simulated on the frequency-domain path only",
             ));
         }
         let d = cfg.delay_samples;

@@ -151,6 +151,20 @@ pub struct WaferArgs {
     /// Crossover of the rigid-body loops, Hz.
     #[arg(long, default_value_t = 20.0)]
     pub bandwidth_hz: f64,
+    /// An undeclared factor of unit static gain on every entry (an amplifier's
+    /// bandwidth): `F` for a first-order lag `1 / (1 + s / 2 pi F)`, `F:ZETA` for a
+    /// second-order `w^2 / (s^2 + 2 ZETA w s + w^2)`, `w = 2 pi F`. E.g. `2500`.
+    #[arg(long, value_name = "F[:ZETA]")]
+    pub common_dynamics: Option<String>,
+    /// An undeclared factor on one output row (a sensor or its mount), output 1-based:
+    /// `I:F` (first-order lag) or `I:F:ZETA` (second-order resonance), e.g. `2:1450:0.03`
+    /// for a sensor-mount resonance at 1.45 kHz. Repeatable.
+    #[arg(long, value_name = "I:F[:ZETA]")]
+    pub output_dynamics: Vec<String>,
+    /// An undeclared factor on one input column (an actuator or its mount), input
+    /// 1-based: `J:F` or `J:F:ZETA` as for `--output-dynamics`. Repeatable.
+    #[arg(long, value_name = "J:F[:ZETA]")]
+    pub input_dynamics: Vec<String>,
     /// Simulation path.
     #[arg(long, value_enum, default_value_t = PathArg::Frequency)]
     pub path: PathArg,
@@ -248,8 +262,98 @@ fn run_random(a: RandomArgs, quiet: bool) -> Result<(), FrfitError> {
     Ok(())
 }
 
+/// A factor of `--common-dynamics` (`which` = false: `F[:ZETA]`) or of
+/// `--input-dynamics`/`--output-dynamics` (`I:F[:ZETA]`, 1-based), on `target`.
+fn parse_factor(
+    option: &str,
+    value: &str,
+    target: fn(usize) -> realize::FactorTarget,
+    indexed: bool,
+) -> Result<realize::DynamicsFactor, FrfitError> {
+    let bad = |why: &str| FrfitError::Argument {
+        name: option.into(),
+        value: value.into(),
+        why: why.into(),
+    };
+    let parts: Vec<&str> = value.split(':').map(str::trim).collect();
+    let (index, rest) = if indexed {
+        let i: usize = parts
+            .first()
+            .and_then(|x| x.parse().ok())
+            .filter(|i| *i >= 1)
+            .ok_or_else(|| bad("expected I:F[:ZETA] with I a 1-based index"))?;
+        (i - 1, &parts[1..])
+    } else {
+        (0, &parts[..])
+    };
+    let num = |x: &str| x.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0);
+    match rest {
+        [f] => {
+            let f = num(f).ok_or_else(|| bad("the corner frequency F must be > 0 Hz"))?;
+            Ok(realize::DynamicsFactor::first_order(target(index), f))
+        }
+        [f, z] => {
+            let f = num(f).ok_or_else(|| bad("the frequency F must be > 0 Hz"))?;
+            let z = num(z).ok_or_else(|| bad("the damping ZETA must be > 0"))?;
+            Ok(realize::DynamicsFactor::second_order(target(index), f, z))
+        }
+        _ => Err(bad(if indexed {
+            "expected I:F (first order) or I:F:ZETA (second order)"
+        } else {
+            "expected F (first order) or F:ZETA (second order)"
+        })),
+    }
+}
+
+/// The undeclared dynamics factors of `a`.
+fn wafer_factors(a: &WaferArgs) -> Result<Vec<realize::DynamicsFactor>, FrfitError> {
+    let mut out = Vec::new();
+    if let Some(v) = &a.common_dynamics {
+        out.push(parse_factor(
+            "--common-dynamics",
+            v,
+            |_| realize::FactorTarget::All,
+            false,
+        )?);
+    }
+    for v in &a.output_dynamics {
+        out.push(parse_factor(
+            "--output-dynamics",
+            v,
+            realize::FactorTarget::Output,
+            true,
+        )?);
+    }
+    for v in &a.input_dynamics {
+        out.push(parse_factor(
+            "--input-dynamics",
+            v,
+            realize::FactorTarget::Input,
+            true,
+        )?);
+    }
+    Ok(out)
+}
+
+/// A factor in words: `first-order lag at 2500 Hz on every entry`.
+fn describe_factor(d: &realize::DynamicsFactor) -> String {
+    let f_hz = d.scale / std::f64::consts::TAU;
+    let what = match d.den.as_slice() {
+        [_] => format!("first-order lag at {f_hz} Hz"),
+        [two_zeta, _] => format!("second-order factor at {f_hz} Hz, zeta {}", 0.5 * two_zeta),
+        _ => format!("factor of order {}", d.den.len()),
+    };
+    let on = match d.target {
+        realize::FactorTarget::All => "every entry".to_string(),
+        realize::FactorTarget::Output(i) => format!("output {}", i + 1),
+        realize::FactorTarget::Input(j) => format!("input {}", j + 1),
+    };
+    format!("{what} on {on}")
+}
+
 fn run_wafer(a: WaferArgs, quiet: bool) -> Result<(), FrfitError> {
     let t0 = Instant::now();
+    let factors = wafer_factors(&a)?;
     let stage = WaferStageConfig {
         seed: a.seed,
         ..WaferStageConfig::default()
@@ -271,6 +375,7 @@ fn run_wafer(a: WaferArgs, quiet: bool) -> Result<(), FrfitError> {
         stochastic_distortion: a.distortion,
         delay_samples: stage.delay_samples,
         excited_inputs: None,
+        plant_dynamics: factors.clone(),
         seed: a.seed,
         keep_time_signals: false,
     };
@@ -336,9 +441,30 @@ fn run_wafer(a: WaferArgs, quiet: bool) -> Result<(), FrfitError> {
             }
         ));
     }
+    for d in &factors {
+        comments.push(format!(
+            "undeclared dynamics (simulated, not in the nominal model): {}",
+            describe_factor(d)
+        ));
+    }
     frf_data::io::write_frf_csv(&a.out, &est.frf, &comments)?;
     if let Some(t) = &a.truth {
-        write_truth(t, &w.stage.truth())?;
+        let mut truth = w.stage.truth();
+        if !factors.is_empty() {
+            let list: Vec<serde_json::Value> = factors
+                .iter()
+                .map(|d| {
+                    serde_json::json!({
+                        "factor": d,
+                        "description": describe_factor(d),
+                    })
+                })
+                .collect();
+            truth
+                .effects
+                .insert("dynamics".into(), serde_json::Value::Array(list));
+        }
+        write_truth(t, &truth)?;
     }
     if let Some(p) = &a.noiseless {
         let mut f = w.experiment.true_frf()?;
@@ -347,8 +473,13 @@ fn run_wafer(a: WaferArgs, quiet: bool) -> Result<(), FrfitError> {
             p,
             &f,
             &[format!(
-                "synthetic wafer stage, seed {}: exact noiseless response (zero-order hold + delay)",
-                a.seed
+                "synthetic wafer stage, seed {}: exact noiseless response (zero-order hold + delay{})",
+                a.seed,
+                if factors.is_empty() {
+                    ""
+                } else {
+                    " + the undeclared dynamics"
+                }
             )],
         )?;
     }
@@ -393,6 +524,9 @@ mod tests {
             nonlinearity: 0.0,
             distortion: 0.0,
             bandwidth_hz: 20.0,
+            common_dynamics: None,
+            output_dynamics: Vec::new(),
+            input_dynamics: Vec::new(),
             path: PathArg::Frequency,
         }
     }
@@ -487,6 +621,53 @@ mod tests {
         std::fs::remove_dir_all(&dir).ok();
     }
 
+    /// The undeclared factors multiply the noiseless response entry by entry, on the
+    /// entries they target, and are written to the truth file.
+    #[test]
+    fn undeclared_dynamics_are_in_the_noiseless_response_and_the_truth() {
+        let dir = std::env::temp_dir().join(format!("frfit_simulate_dyn_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let plain = args(&dir);
+        let mut with = args(&dir);
+        with.out = dir.join("dyn.csv");
+        with.noiseless = Some(dir.join("dyn.noiseless.csv"));
+        with.truth = Some(dir.join("dyn.truth.json"));
+        with.spectra = None;
+        with.common_dynamics = Some("2500".into());
+        with.output_dynamics = vec!["2:450:0.03".into()];
+        for a in [plain, with] {
+            run(
+                Args {
+                    target: Target::WaferStage(a),
+                },
+                true,
+            )
+            .unwrap();
+        }
+        let g0 = frf_data::io::read_frf_csv(dir.join("ws.noiseless.csv")).unwrap();
+        let g1 = frf_data::io::read_frf_csv(dir.join("dyn.noiseless.csv")).unwrap();
+        let mut worst = 0.0f64;
+        for k in 0..g0.n_lines() {
+            let s = frf_data::C64::new(0.0, g0.freq_hz(k) / 2500.0);
+            let lag = (s + 1.0).inv();
+            let w = g0.freq_hz(k) / 450.0;
+            let res = frf_data::C64::new(1.0 - w * w, 0.06 * w).inv();
+            for i in 0..4 {
+                for j in 0..13 {
+                    let f = if i == 1 { lag * res } else { lag };
+                    let want = g0.value(k, i, j) * f;
+                    worst = worst.max((g1.value(k, i, j) - want).norm() / want.norm());
+                }
+            }
+        }
+        assert!(worst < 1e-9, "factors in the noiseless response: {worst:e}");
+        let truth = Truth::read(dir.join("dyn.truth.json")).unwrap();
+        let list = truth.effects["dynamics"].as_array().unwrap();
+        assert_eq!(list.len(), 2);
+        assert_eq!(list[1]["factor"]["target"]["index"], 1);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
     #[test]
     fn bad_settings_are_errors() {
         let dir = std::env::temp_dir().join(format!("frfit_simulate_bad_{}", std::process::id()));
@@ -498,6 +679,15 @@ mod tests {
             |a| a.distortion = -1e-3,
             |a| {
                 a.distortion = 1e-3;
+                a.path = PathArg::Time;
+            },
+            |a| a.common_dynamics = Some("0".into()),
+            |a| a.common_dynamics = Some("2500:0.7:1".into()),
+            |a| a.output_dynamics = vec!["5:1450:0.03".into()],
+            |a| a.input_dynamics = vec!["0:1000".into()],
+            |a| a.input_dynamics = vec!["2:1000:-0.1".into()],
+            |a| {
+                a.common_dynamics = Some("2500".into());
                 a.path = PathArg::Time;
             },
         ] {

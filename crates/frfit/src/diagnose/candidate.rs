@@ -2,7 +2,10 @@
 //! the parameters the refit starts from, proposed from the residual analysis.
 
 use additive_riv::structure::ResidualStats;
-use additive_riv::{augment, AdditiveModel, FactorTarget, FitData, RivError, SubmodelKind};
+use additive_riv::{
+    augment, AdditiveModel, DynamicsFactor, FactorTarget, FitData, RivError, SubmodelKind,
+};
+use frf_data::ModelStructure;
 use validation::residual::{Effect, ResidualAnalysis};
 
 /// Where a delay candidate's start comes from.
@@ -58,20 +61,90 @@ pub enum Candidate {
         /// clamps it to `[1e-3, 0.9]`).
         zeta: f64,
     },
-    /// A first-order dynamics factor on inputs (actuator dynamics).
+    /// A dynamics factor of unit static gain on one input column (actuator dynamics),
+    /// or, when `inputs` holds every input, common to every entry (an amplifier's
+    /// bandwidth).
     InputDynamics {
         /// The inputs, 1-based.
         inputs: Vec<usize>,
-        /// Starting corner frequencies, Hz.
-        poles: Vec<f64>,
+        /// Order and starting pole.
+        start: FactorStart,
     },
-    /// A first-order dynamics factor on outputs (sensor dynamics).
+    /// A dynamics factor of unit static gain on one output row (sensor or sensor-mount
+    /// dynamics); when `outputs` holds every output, common to every entry (the
+    /// equivalent form of a common `InputDynamics`).
     OutputDynamics {
         /// The outputs, 1-based.
         outputs: Vec<usize>,
-        /// Starting corner frequencies, Hz.
-        poles: Vec<f64>,
+        /// Order and starting pole.
+        start: FactorStart,
     },
+}
+
+/// The order and starting pole of a dynamics-factor candidate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FactorStart {
+    /// 1: a lag `1 / (1 + s / w)`; 2: `w^2 / (s^2 + 2 zeta w s + w^2)`.
+    pub order: usize,
+    /// Corner (order 1) or natural frequency (order 2), Hz.
+    pub f_hz: f64,
+    /// Relative damping (order 2; ignored for order 1).
+    pub zeta: f64,
+    /// Submodels (indices in the current model) the factor replaces: modes that live in
+    /// the factor's row or column alone, where the first fit took the factor's
+    /// resonance for a mode.
+    pub replaces: Vec<usize>,
+}
+
+impl FactorStart {
+    /// The start from a signature `f` of the residual at `order`: its corner (1 kHz
+    /// when the first-order fit found none) or its second-order frequency and damping
+    /// (damping clamped to `[0.005, 1]`).
+    pub fn from_signature(f: &validation::IoFactor, order: usize) -> Self {
+        if order == 2 && f.second_order.f_hz.is_finite() && f.second_order.f_hz > 0.0 {
+            FactorStart {
+                order: 2,
+                f_hz: f.second_order.f_hz,
+                zeta: f.second_order.zeta.clamp(0.005, 1.0),
+                replaces: Vec::new(),
+            }
+        } else {
+            let f_hz = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
+                f.pole_hz
+            } else {
+                1e3
+            };
+            FactorStart {
+                order: 1,
+                f_hz,
+                zeta: 1.0,
+                replaces: Vec::new(),
+            }
+        }
+    }
+
+    /// The factor on `target`.
+    pub fn factor(&self, target: FactorTarget) -> Result<DynamicsFactor, RivError> {
+        if !(self.f_hz.is_finite() && self.f_hz > 0.0) {
+            return Err(RivError::invalid(
+                "factor frequency",
+                self.f_hz,
+                "must be > 0 Hz",
+            ));
+        }
+        match self.order {
+            1 => Ok(DynamicsFactor::first_order(target, self.f_hz)),
+            2 if self.zeta.is_finite() && self.zeta > 0.0 => {
+                Ok(DynamicsFactor::second_order(target, self.f_hz, self.zeta))
+            }
+            2 => Err(RivError::invalid(
+                "factor damping",
+                self.zeta,
+                "must be > 0",
+            )),
+            o => Err(RivError::invalid("factor order", o, "must be 1 or 2")),
+        }
+    }
 }
 
 /// A candidate with the evidence that proposed it.
@@ -103,11 +176,19 @@ impl Candidate {
     pub fn key(&self) -> String {
         match self {
             Candidate::MissedMode { peak_hz, .. } => mode_key(*peak_hz),
-            Candidate::InputDynamics { inputs: v, .. }
-            | Candidate::OutputDynamics { outputs: v, .. } => v
-                .first()
-                .map(|i| format!("{}", i.saturating_sub(1)))
-                .unwrap_or_default(),
+            Candidate::InputDynamics { inputs: v, start }
+            | Candidate::OutputDynamics { outputs: v, start } => {
+                let which = if v.len() > 1 {
+                    "all".to_string()
+                } else {
+                    v.first()
+                        .map(|i| format!("{}", i.saturating_sub(1)))
+                        .unwrap_or_default()
+                };
+                let replaced: Vec<String> =
+                    start.replaces.iter().map(|i| format!(":m{i}")).collect();
+                format!("{which}:{}{}", start.order, replaced.concat())
+            }
             Candidate::Delay {
                 start: DelayStart::DataSlope,
                 ..
@@ -131,30 +212,192 @@ impl Candidate {
             Candidate::Stiffness { f_hz, zeta } => {
                 augment::with_stiffness(model, *f_hz, zeta.clamp(1e-3, 0.9))
             }
-            Candidate::InputDynamics { inputs, poles } => {
-                dynamics(model, FactorTarget::Input, inputs, poles)
+            Candidate::InputDynamics { inputs, start } => {
+                dynamics(model, FactorTarget::Input, inputs, model.nu(), start)
             }
-            Candidate::OutputDynamics { outputs, poles } => {
-                dynamics(model, FactorTarget::Output, outputs, poles)
+            Candidate::OutputDynamics { outputs, start } => {
+                dynamics(model, FactorTarget::Output, outputs, model.ny(), start)
             }
+        }
+    }
+
+    /// True for a dynamics factor common to every entry.
+    pub fn is_common_factor(&self) -> bool {
+        match self {
+            Candidate::InputDynamics { inputs: v, .. }
+            | Candidate::OutputDynamics { outputs: v, .. } => v.len() > 1,
+            _ => false,
         }
     }
 }
 
-/// A first-order factor on the first of `which` (1-based) at the first of `poles`.
+/// The factor `start` on `which` (1-based, one of `n`; all `n` of them: the common
+/// factor).
 fn dynamics(
     model: &AdditiveModel,
     target: fn(usize) -> FactorTarget,
     which: &[usize],
-    poles: &[f64],
+    n: usize,
+    start: &FactorStart,
 ) -> Result<AdditiveModel, RivError> {
-    let (Some(index), Some(&pole)) = (which.first().and_then(|i| i.checked_sub(1)), poles.first())
-    else {
-        return Err(RivError::Structure(
-            "a dynamics candidate needs an input or output (1-based) and a pole".into(),
-        ));
+    let target = match which {
+        [i] if (1..=n).contains(i) => target(i - 1),
+        v if v.len() == n && (1..=n).all(|i| v.contains(&i)) => FactorTarget::All,
+        _ => {
+            return Err(RivError::Structure(format!(
+                "a dynamics candidate needs one input or output (1-based, of {n}) or all of them, got {which:?}"
+            )))
+        }
     };
-    augment::with_dynamics(model, target(index), 1, pole)
+    let mut m = model.clone();
+    let mut gone = start.replaces.clone();
+    gone.sort_unstable();
+    gone.dedup();
+    for &i in gone.iter().rev() {
+        if m.submodels.get(i).map(|s| s.kind) != Some(SubmodelKind::Mode) {
+            return Err(RivError::Structure(format!(
+                "submodel {i} that the factor would replace is not a mode"
+            )));
+        }
+        m.remove_submodel(i);
+    }
+    m.push_dynamics(start.factor(target)?)?;
+    Ok(m)
+}
+
+/// The share of each output row (`rows = true`) or input column of a submodel's
+/// numerator energy (all numerator matrices, in the scaled variable).
+fn numerator_shares(s: &additive_riv::Submodel, rows: bool) -> Vec<f64> {
+    let (ny, nu) = s
+        .num
+        .first()
+        .map(|b| (b.nrows(), b.ncols()))
+        .unwrap_or((0, 0));
+    let mut v = vec![0.0; if rows { ny } else { nu }];
+    for b in &s.num {
+        for j in 0..nu {
+            for i in 0..ny {
+                v[if rows { i } else { j }] += b[(i, j)].powi(2);
+            }
+        }
+    }
+    let t: f64 = v.iter().sum();
+    if t > 0.0 {
+        v.iter_mut().for_each(|x| *x /= t);
+    }
+    v
+}
+
+/// Second-order factor candidates from the model itself: a mode whose numerator lives
+/// in one output row (or one input column), at least `LOCAL_SHARE` of its energy, where
+/// the residual concentrates (the dominant row or column of the residual), is what a
+/// first fit makes of a sensor's (actuator's) mount resonance: the resonance seen in
+/// that row only. The candidate replaces that mode by a second-order factor on the
+/// row; its start is screened on a grid of frequencies around the mode's and of damping
+/// values by the cost after the numerator fit (eq. 24: the numerators are linear given
+/// the poles and the factor, so each grid point is one convex fit), and the refit and
+/// its F test decide between the mode and the factor. At most the two most local modes
+/// of the row are tried. `(row or column, start)` per candidate.
+fn local_modes(
+    model: &AdditiveModel,
+    an: &ResidualAnalysis,
+    fd: &FitData,
+    rows: bool,
+) -> Vec<(usize, FactorStart)> {
+    const LOCAL_SHARE: f64 = 0.8;
+    let n = if rows { model.ny() } else { model.nu() };
+    let dominant = if rows {
+        an.concentration.dominant_row
+    } else {
+        an.concentration.dominant_col
+    };
+    let Some(k) = dominant.filter(|_| n >= 2) else {
+        return Vec::new();
+    };
+    let mut local: Vec<(f64, usize, f64, f64)> = model
+        .modes()
+        .iter()
+        .filter(|m| m.zeta > 0.0)
+        .filter_map(|m| {
+            let share = numerator_shares(&model.submodels[m.submodel], rows)
+                .get(k)
+                .copied()
+                .unwrap_or(0.0);
+            (share >= LOCAL_SHARE).then_some((share, m.submodel, m.f_hz, m.zeta))
+        })
+        .collect();
+    local.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let target = if rows {
+        FactorTarget::Output(k)
+    } else {
+        FactorTarget::Input(k)
+    };
+    let mut out: Vec<(usize, FactorStart)> = Vec::new();
+    for &(_, sub, f, z) in local.iter().take(2) {
+        let mut base = model.clone();
+        base.remove_submodel(sub);
+        let Some((f_hz, zeta)) = screen_second_order(&base, target, f, z, fd) else {
+            continue;
+        };
+        // two modes of the row that screen to nearly the same factor (a resonance the
+        // first fit split in two) are one candidate
+        if out.iter().any(|(_, s)| (s.f_hz / f_hz - 1.0).abs() < 0.05) {
+            continue;
+        }
+        out.push((
+            k,
+            FactorStart {
+                order: 2,
+                f_hz,
+                zeta,
+                replaces: vec![sub],
+            },
+        ));
+    }
+    out
+}
+
+/// The start of a second-order factor on `target` added to `base`: the frequency and
+/// damping, on a grid of `f_hz` times 0.92..1.08 and damping 0.005..0.2 refined once
+/// around its best point, with the least cost after the numerator fit. `None` when no
+/// grid point could be fitted.
+fn screen_second_order(
+    base: &AdditiveModel,
+    target: FactorTarget,
+    f_hz: f64,
+    zeta: f64,
+    fd: &FitData,
+) -> Option<(f64, f64)> {
+    let cost = |f: f64, z: f64| -> f64 {
+        let mut m = base.clone();
+        if m.push_dynamics(DynamicsFactor::second_order(target, f, z))
+            .is_err()
+        {
+            return f64::INFINITY;
+        }
+        additive_riv::fit_numerators(&mut m, fd).unwrap_or(f64::INFINITY)
+    };
+    let mut best = (f64::INFINITY, f_hz, zeta.clamp(0.005, 0.2));
+    let (mut lf, mut lz) = (f_hz.ln(), best.2.ln());
+    let (mut hf, mut hz) = (0.08f64, (0.2f64 / 0.005).ln() / 2.0);
+    let (mut cf, mut cz) = (lf, (0.005f64 * 0.2).sqrt().ln());
+    for _ in 0..2 {
+        for a in -3..=3 {
+            for b in -2..=2 {
+                let f = (cf + hf * a as f64 / 3.0).exp();
+                let z = (cz + hz * b as f64 / 2.0).exp().clamp(0.002, 1.0);
+                let c = cost(f, z);
+                if c < best.0 {
+                    best = (c, f, z);
+                    (lf, lz) = (f.ln(), z.ln());
+                }
+            }
+        }
+        (cf, cz) = (lf, lz);
+        hf /= 3.0;
+        hz /= 2.0;
+    }
+    best.0.is_finite().then_some((best.1, best.2))
 }
 
 /// The key of a missed mode at `f_hz` (its frequency to 0.1 Hz).
@@ -328,38 +571,145 @@ pub fn propose(
             );
         }
     }
+    propose_dynamics(model, an, fd, alpha, &seen, &mut push);
+    out
+}
+
+/// The dynamics-factor candidates: the row or column whose factor (of the order its
+/// signature supports, [`validation::IoFactor::order`]) explains the most, and the
+/// factor common to every entry, proposed with it (the trial tests both supports and
+/// the refits' F tests decide) or on its own signature. A common factor is proposed as
+/// `input_dynamics` with every input.
+fn propose_dynamics(
+    model: &AdditiveModel,
+    an: &ResidualAnalysis,
+    fd: &FitData,
+    alpha: f64,
+    seen: &dyn Fn(Effect, &str) -> bool,
+    push: &mut dyn FnMut(Candidate, String),
+) {
+    let c = an.significance.line_scale;
+    let band = (
+        an.freq_hz.first().copied().unwrap_or(0.0),
+        an.freq_hz.last().copied().unwrap_or(0.0),
+    );
+    let order_of = |f: &validation::IoFactor| f.order(c, alpha, band);
+    let explained = |f: &validation::IoFactor| match order_of(f) {
+        2 => f.second_order.fit.explained,
+        _ => f.fit.explained,
+    };
+    let supported = |f: &validation::IoFactor| match order_of(f) {
+        2 => plausible(&f.second_order.fit, alpha),
+        _ => plausible(&f.fit, alpha),
+    };
+    let describe = |f: &validation::IoFactor, on: String, start: &FactorStart| -> String {
+        let shape = if start.order == 2 {
+            format!(
+                "second order at {:.1} Hz, zeta {:.3} ({:.0}% of the excess; first order {:.0}%)",
+                start.f_hz,
+                start.zeta,
+                100.0 * f.second_order.fit.explained_fraction,
+                100.0 * f.fit.explained_fraction
+            )
+        } else {
+            format!(
+                "first order, corner {:.1} Hz ({:.0}% of the excess; second order {:.0}%)",
+                start.f_hz,
+                100.0 * f.fit.explained_fraction,
+                100.0 * f.second_order.fit.explained_fraction
+            )
+        };
+        format!(
+            "factor on {on}: {shape}; {:.0}% of the excess in that support",
+            100.0 * f.energy_fraction
+        )
+    };
+    let mut any_support = false;
     for (effect, list, input) in [
         (Effect::InputDynamics, &an.input_dynamics, true),
         (Effect::OutputDynamics, &an.output_dynamics, false),
     ] {
-        // the strongest row or column whose first-order factor is significant
+        // the strongest row or column whose factor is significant
         let best = list
             .iter()
-            .filter(|f| plausible(&f.fit, alpha))
-            .max_by(|a, b| a.fit.explained.total_cmp(&b.fit.explained));
-        if let Some(f) = best {
-            if seen(effect, &format!("{}", f.index)) {
-                continue;
+            .filter(|f| supported(f))
+            .max_by(|a, b| explained(a).total_cmp(&explained(b)));
+        let Some(f) = best else { continue };
+        any_support = true;
+        let start = FactorStart::from_signature(f, order_of(f));
+        let which = vec![f.index + 1];
+        let on = format!("{} {}", if input { "input" } else { "output" }, f.index + 1);
+        let ev = describe(f, on, &start);
+        let candidate = if input {
+            Candidate::InputDynamics {
+                inputs: which,
+                start,
             }
-            let pole = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
-                f.pole_hz
-            } else {
-                1e3
-            };
-            let (which, poles) = (vec![f.index + 1], vec![pole]);
+        } else {
+            Candidate::OutputDynamics {
+                outputs: which,
+                start,
+            }
+        };
+        if seen(effect, &candidate.key()) {
+            continue;
+        }
+        push(candidate, ev);
+    }
+    for (effect, input) in [
+        (Effect::InputDynamics, true),
+        (Effect::OutputDynamics, false),
+    ] {
+        for (k, start) in local_modes(model, an, fd, !input) {
+            let which = vec![k + 1];
             let candidate = if input {
                 Candidate::InputDynamics {
                     inputs: which,
-                    poles,
+                    start: start.clone(),
                 }
             } else {
                 Candidate::OutputDynamics {
                     outputs: which,
-                    poles,
+                    start: start.clone(),
                 }
             };
-            push(candidate, detail(an, effect));
+            if seen(effect, &candidate.key()) {
+                continue;
+            }
+            any_support = true;
+            let freqs: Vec<String> = start
+                .replaces
+                .iter()
+                .filter_map(|&i| model.submodels.get(i))
+                .filter_map(|s| model.upper_pole(s))
+                .map(|p| format!("{:.1} Hz", p.norm() / std::f64::consts::TAU))
+                .collect();
+            let (what, share) = if input {
+                ("input", an.concentration.col_fraction[k])
+            } else {
+                ("output", an.concentration.row_fraction[k])
+            };
+            let ev = format!(
+                "the mode at {} lives in {what} {} alone, where {:.0}% of the residual's excess is: a resonance of that {what}'s dynamics rather than of the structure? second-order factor in its place, started at {:.1} Hz, zeta {:.3} (screened by the numerator fit)",
+                freqs.join(", "),
+                k + 1,
+                100.0 * share,
+                start.f_hz,
+                start.zeta
+            );
+            push(candidate, ev);
         }
     }
-    out
+    let common = &an.common_dynamics;
+    if (any_support || supported(common)) && model.nu() > 1 {
+        let start = FactorStart::from_signature(common, order_of(common));
+        let ev = describe(common, "every entry (common to all inputs)".into(), &start);
+        let candidate = Candidate::InputDynamics {
+            inputs: (1..=model.nu()).collect(),
+            start,
+        };
+        if !seen(Effect::InputDynamics, &candidate.key()) {
+            push(candidate, ev);
+        }
+    }
 }

@@ -1,7 +1,7 @@
 //! What a trial found: the effect's parameters as fitted, serialised as the `params` of
 //! a step of `summary.json` (field names of the README's schema section).
 
-use super::candidate::Candidate;
+use super::candidate::{Candidate, FactorStart};
 use additive_riv::{AdditiveModel, SubmodelKind};
 use serde::Serialize;
 use std::f64::consts::TAU;
@@ -15,12 +15,15 @@ pub enum Refit {
     FromTheStart,
 }
 
-/// A pole of a dynamics factor: `f_hz = |p| / 2 pi`, and the pole itself (rad/s) once
-/// fitted.
+/// A pole (or zero) of a dynamics factor: `f_hz = |p| / 2 pi`, and, once fitted, its
+/// relative damping `-Re p / |p|` and the root itself (rad/s).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct PoleParams {
     /// `|p| / 2 pi`, Hz.
     pub f_hz: f64,
+    /// Relative damping `-Re p / |p|` (1 for a real pole in the left half-plane).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zeta: Option<f64>,
     /// Real part, rad/s.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub re: Option<f64>,
@@ -72,19 +75,33 @@ pub enum FittedEffect {
         /// Its relative damping.
         zeta: f64,
     },
-    /// `input_dynamics`: a factor on inputs.
+    /// `input_dynamics`: a factor on one input column, or common to every entry.
     InputDynamics {
-        /// The inputs, 1-based.
+        /// The inputs, 1-based (every input for the common factor).
         inputs: Vec<usize>,
+        /// `"all"` for a factor common to every entry, `"inputs"` otherwise.
+        support: &'static str,
+        /// Order of the factor's denominator (1 or 2).
+        order: usize,
         /// Its poles.
         poles: Vec<PoleParams>,
+        /// Its zeros (none for an all-pole factor).
+        #[serde(skip_serializing_if = "Vec::is_empty")]
+        zeros: Vec<PoleParams>,
     },
-    /// `output_dynamics`: a factor on outputs.
+    /// `output_dynamics`: a factor on one output row, or common to every entry.
     OutputDynamics {
-        /// The outputs, 1-based.
+        /// The outputs, 1-based (every output for the common factor).
         outputs: Vec<usize>,
+        /// `"all"` for a factor common to every entry, `"outputs"` otherwise.
+        support: &'static str,
+        /// Order of the factor's denominator (1 or 2).
+        order: usize,
         /// Its poles.
         poles: Vec<PoleParams>,
+        /// Its zeros (none for an all-pole factor).
+        #[serde(skip_serializing_if = "Vec::is_empty")]
+        zeros: Vec<PoleParams>,
     },
 }
 
@@ -167,38 +184,68 @@ impl FittedEffect {
                 };
                 FittedEffect::Stiffness { f_hz, zeta }
             }
-            Candidate::InputDynamics { inputs, poles } => FittedEffect::InputDynamics {
-                inputs: inputs.clone(),
-                poles: fitted_poles(m, poles),
-            },
-            Candidate::OutputDynamics { outputs, poles } => FittedEffect::OutputDynamics {
-                outputs: outputs.clone(),
-                poles: fitted_poles(m, poles),
-            },
+            Candidate::InputDynamics { inputs, start } => {
+                let (poles, zeros) = fitted_roots(m, start);
+                FittedEffect::InputDynamics {
+                    inputs: inputs.clone(),
+                    support: if candidate.is_common_factor() {
+                        "all"
+                    } else {
+                        "inputs"
+                    },
+                    order: start.order,
+                    poles,
+                    zeros,
+                }
+            }
+            Candidate::OutputDynamics { outputs, start } => {
+                let (poles, zeros) = fitted_roots(m, start);
+                FittedEffect::OutputDynamics {
+                    outputs: outputs.clone(),
+                    support: if candidate.is_common_factor() {
+                        "all"
+                    } else {
+                        "outputs"
+                    },
+                    order: start.order,
+                    poles,
+                    zeros,
+                }
+            }
         }
     }
 }
 
-/// The poles of the newest dynamics factor of `m` (the candidate's), or the starting
-/// corners when it has none.
-fn fitted_poles(m: &AdditiveModel, start: &[f64]) -> Vec<PoleParams> {
+/// A root (rad/s) as reported.
+fn root_params(p: &realize::C64) -> PoleParams {
+    let f = p.norm();
+    PoleParams {
+        f_hz: f / TAU,
+        zeta: (f > 0.0).then(|| -p.re / f),
+        re: Some(p.re),
+        im: Some(p.im),
+    }
+}
+
+/// The poles and zeros of the newest dynamics factor of `m` (the candidate's; one of
+/// each complex pair, the upper; lowest frequency first), or the starting pole when it has none.
+fn fitted_roots(m: &AdditiveModel, start: &FactorStart) -> (Vec<PoleParams>, Vec<PoleParams>) {
+    // lowest frequency first: the factor's corner, then any far pole
+    let upper = |v: Vec<realize::C64>| -> Vec<PoleParams> {
+        let mut r: Vec<PoleParams> = v.iter().filter(|p| p.im >= 0.0).map(root_params).collect();
+        r.sort_by(|a, b| a.f_hz.total_cmp(&b.f_hz));
+        r
+    };
     match m.dynamics.last() {
-        Some(d) => d
-            .poles()
-            .iter()
-            .map(|p| PoleParams {
-                f_hz: p.norm() / TAU,
-                re: Some(p.re),
-                im: Some(p.im),
-            })
-            .collect(),
-        None => start
-            .iter()
-            .map(|&f_hz| PoleParams {
-                f_hz,
+        Some(d) => (upper(d.poles()), upper(d.zeros())),
+        None => (
+            vec![PoleParams {
+                f_hz: start.f_hz,
+                zeta: (start.order == 2).then_some(start.zeta),
                 re: None,
                 im: None,
-            })
-            .collect(),
+            }],
+            Vec::new(),
+        ),
     }
 }

@@ -26,7 +26,7 @@ mod fitted;
 mod restart;
 mod trial;
 
-pub use candidate::{Candidate, DelayStart, Proposal};
+pub use candidate::{Candidate, DelayStart, FactorStart, Proposal};
 pub use fitted::{FittedEffect, PoleParams, Refit};
 pub use restart::{
     better_first_fit, delay_restart, worth_a_delay_restart, DelayRestart, Restarted,

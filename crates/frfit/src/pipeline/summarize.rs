@@ -126,7 +126,15 @@ pub fn final_model_summary(fit: &Fit<AdditiveModel>) -> FinalModelSummary {
                 let poles: Vec<String> = d
                     .poles()
                     .iter()
-                    .map(|p| format!("{:.1} Hz", p.norm() / std::f64::consts::TAU))
+                    .filter(|p| p.im >= 0.0)
+                    .map(|p| match p.im {
+                        0.0 => format!("{:.1} Hz", p.norm() / std::f64::consts::TAU),
+                        _ => format!(
+                            "{:.1} Hz (zeta {:.3})",
+                            p.norm() / std::f64::consts::TAU,
+                            -p.re / p.norm()
+                        ),
+                    })
                     .collect();
                 format!("{target}: poles at {}", poles.join(", "))
             })

@@ -106,7 +106,7 @@ pub fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
 /// realization), estimated in the frequency domain and commented as `frfit simulate`
 /// writes; the estimate and the exact response.
 pub fn simulated_wafer(periods: usize, realizations: usize, distortion: f64) -> (Frf, Frf) {
-    noisy_simulated_wafer(periods, realizations, distortion, 1.0)
+    simulated_wafer_with(40_000, periods, realizations, distortion, Vec::new(), 1.0)
 }
 
 /// [`simulated_wafer`] with the sensor noise (white and drift) `noise_gain` times the
@@ -117,12 +117,34 @@ pub fn noisy_simulated_wafer(
     distortion: f64,
     noise_gain: f64,
 ) -> (Frf, Frf) {
+    simulated_wafer_with(
+        40_000,
+        periods,
+        realizations,
+        distortion,
+        Vec::new(),
+        noise_gain,
+    )
+}
+
+/// [`simulated_wafer`] with `period` samples per period (40000: lines 0.5 Hz apart,
+/// 20000: 1 Hz), undeclared dynamics factors `plant_dynamics` (see
+/// `experiment::synth::ExperimentConfig::plant_dynamics`), in the estimate and the exact
+/// response alike, and the sensor noise `noise_gain` times the default.
+pub fn simulated_wafer_with(
+    period: usize,
+    periods: usize,
+    realizations: usize,
+    distortion: f64,
+    plant_dynamics: Vec<realize::DynamicsFactor>,
+    noise_gain: f64,
+) -> (Frf, Frf) {
     let stage = WaferStageConfig {
         seed: 3,
         ..WaferStageConfig::default()
     };
     let exp = ExperimentConfig {
-        grid: LineGrid::odd(stage.fs, 40_000, 0.0, 2000.0).unwrap(),
+        grid: LineGrid::odd(stage.fs, period, 0.0, 2000.0).unwrap(),
         periods,
         realizations,
         transient_periods: 1,
@@ -137,6 +159,7 @@ pub fn noisy_simulated_wafer(
         stochastic_distortion: distortion,
         delay_samples: stage.delay_samples,
         excited_inputs: None,
+        plant_dynamics,
         seed: 3,
         keep_time_signals: false,
     };

@@ -1,0 +1,124 @@
+//! Dynamics factors the nominal model does not declare, on the simulated wafer stage
+//! (seed 3, 2000 lines 1 Hz apart up to 2 kHz, 4 periods x 10 realizations, exact
+//! response known): an amplifier's
+//! bandwidth common to every entry and a sensor-mount resonance on one output row. The
+//! loop must name the factor (support, order, pole) instead of a delay, a feedthrough or
+//! a mode, and end within 1e-4 (median relative) of the noiseless response.
+
+mod common;
+
+use frf_data::Frf;
+use frfit::pipeline::{run, PipelineConfig, PipelineOutput};
+use frfit::summary::StepSummary;
+use realize::{DynamicsFactor, FactorTarget};
+
+/// Runs the diagnosis on `data` and prints its steps.
+fn diagnose(data: &Frf, name: &str) -> PipelineOutput {
+    let cfg = PipelineConfig {
+        diagnose: true,
+        ..Default::default()
+    };
+    let out = run(data, name, &cfg, "diagnose").unwrap();
+    let s = &out.summary;
+    println!("{name}: initial {:?}", s.initial.errors);
+    for st in &s.steps {
+        println!(
+            "  {} accepted={} F={:.1} (crit {:.2}) {} median {:.3e} -> {:.3e}",
+            st.effect,
+            st.accepted,
+            st.f_statistic,
+            st.f_critical,
+            st.params,
+            st.before.median_rel,
+            st.after.median_rel
+        );
+    }
+    println!("  verdict {}, final {:?}", s.verdict, s.final_errors);
+    out
+}
+
+fn accepted<'a>(out: &'a PipelineOutput, effect: &str) -> Vec<&'a StepSummary> {
+    out.summary
+        .steps
+        .iter()
+        .filter(|s| s.accepted && s.effect == effect)
+        .collect()
+}
+
+#[test]
+fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
+    let f_c = 2500.0;
+    let (data, clean) = common::simulated_wafer_with(
+        20_000,
+        4,
+        10,
+        0.0,
+        vec![DynamicsFactor::first_order(FactorTarget::All, f_c)],
+        1.0,
+    );
+    let out = diagnose(&data, "common lag");
+    let steps = accepted(&out, "input_dynamics");
+    assert_eq!(steps.len(), 1, "one input_dynamics step");
+    let p = &steps[0].params;
+    assert_eq!(p["support"], "all");
+    assert_eq!(p["order"], 1);
+    assert_eq!(p["inputs"].as_array().unwrap().len(), 13);
+    let pole = p["poles"][0]["f_hz"].as_f64().unwrap();
+    assert!(
+        (pole / f_c - 1.0).abs() < 0.03,
+        "lag at {pole:.1} Hz, made at {f_c}"
+    );
+    for e in ["delay", "feedthrough", "output_dynamics", "missed_mode"] {
+        assert!(accepted(&out, e).is_empty(), "no {e} step");
+    }
+    assert_eq!(out.summary.verdict, "noise_limited");
+    let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::INFINITY);
+    println!("final model vs noiseless: median {med:.3e}");
+    assert!(med <= 1e-4, "median {med:.3e} vs the noiseless response");
+}
+
+#[test]
+fn a_sensor_mount_resonance_is_a_second_order_factor_on_its_row() {
+    let (f_r, zeta) = (1450.0, 0.03);
+    let (data, clean) = common::simulated_wafer_with(
+        20_000,
+        4,
+        10,
+        0.0,
+        vec![DynamicsFactor::second_order(
+            FactorTarget::Output(1),
+            f_r,
+            zeta,
+        )],
+        1.0,
+    );
+    let out = diagnose(&data, "sensor-mount resonance");
+    let steps = accepted(&out, "output_dynamics");
+    assert_eq!(steps.len(), 1, "one output_dynamics step");
+    let p = &steps[0].params;
+    assert_eq!(p["support"], "outputs");
+    assert_eq!(p["order"], 2);
+    assert_eq!(p["outputs"][0], 2, "the resonance is on output 2");
+    let pole = &p["poles"][0];
+    let (f, z) = (
+        pole["f_hz"].as_f64().unwrap(),
+        pole["zeta"].as_f64().unwrap(),
+    );
+    assert!(
+        (f / f_r - 1.0).abs() < 0.01,
+        "resonance at {f:.1} Hz, made at {f_r}"
+    );
+    assert!((z / zeta - 1.0).abs() < 0.1, "damping {z:.4}, made {zeta}");
+    for e in ["delay", "feedthrough", "input_dynamics", "missed_mode"] {
+        assert!(accepted(&out, e).is_empty(), "no {e} step");
+    }
+    assert_eq!(out.summary.verdict, "noise_limited");
+    assert_eq!(
+        out.summary.final_model.modes.len(),
+        17,
+        "the plate's 17 modes"
+    );
+    let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::INFINITY);
+    println!("final model vs noiseless: median {med:.3e}");
+    assert!(med <= 1e-4, "median {med:.3e} vs the noiseless response");
+}
