@@ -40,8 +40,8 @@ use std::f64::consts::TAU;
 pub struct SplitConfig {
     /// A mode (or a band edge) is examined when the mean of the per-line residual
     /// statistic in its neighbourhood is at least this factor above the statistic's
-    /// median over the band. Default: 4 (at the noise level the ratio is about 1; a
-    /// merged close pair leaves 10 to 1e4).
+    /// lower quintile over the band. Default: 4 (at the noise level the ratio is 1.1 to
+    /// 1.5, depending on the number of entries; a merged close pair leaves 10 to 1e4).
     pub min_excess: f64,
     /// Neighbourhood of a mode: this many half-power half-widths `zeta f` either side of
     /// it. Default: 4.
@@ -178,11 +178,13 @@ fn energy(stats: &ResidualStats, a: usize, b: usize) -> f64 {
     stats.t[a..b].iter().sum::<f64>() * stats.s2 / 2.0
 }
 
-/// The median of the per-line statistic over the band.
-fn median_t(stats: &ResidualStats) -> f64 {
+/// The reference level of the per-line statistic: its lower quintile over the band. A
+/// model that misfits much of the band (a mode's tail reshaping its neighbours) raises
+/// the median too; the lines it fits at the noise level still set the lower quintile.
+fn floor_t(stats: &ResidualStats) -> f64 {
     let mut s = stats.t.clone();
     s.sort_by(|a, b| a.total_cmp(b));
-    s[s.len() / 2]
+    s[s.len() / 5]
 }
 
 /// True when two modes of `model` sit on practically one pole (closer than
@@ -212,7 +214,8 @@ fn first_order_numerators(model: &AdditiveModel) -> bool {
 
 /// `model` with a mode at `f_hz` (damping `zeta`) added, numerators refitted (eq. 24)
 /// and poles settled by Algorithm 1; `None` when the structure is impossible (near the
-/// Nyquist frequency of a sampled model), the iterations fail, or a pole ends unstable.
+/// Nyquist frequency of a sampled model), the iterations fail, or more submodels end
+/// unstable than `model` has.
 fn settled_with_mode(
     model: &AdditiveModel,
     data: &FitData,
@@ -232,12 +235,15 @@ fn settled_with_mode(
 }
 
 fn settle(mut m: AdditiveModel, data: &FitData, coarse: &RivConfig) -> Option<AdditiveModel> {
+    let unstable_before = m.unstable_submodels().len();
     fit_numerators(&mut m, data).ok()?;
     let fit = iterate(m, data, coarse).ok()?;
     if matches!(fit.convergence, Convergence::Failed { .. }) && fit.iterations <= 1 {
         return None;
     }
-    if !fit.model.unstable_submodels().is_empty() {
+    // a pole that leaves the stable region fails the trial; one that was unstable
+    // before (a mode stretched over a tail the model lacks) may stay so
+    if fit.model.unstable_submodels().len() > unstable_before {
         return None;
     }
     model_cost(&fit.model, data)
@@ -248,7 +254,7 @@ fn settle(mut m: AdditiveModel, data: &FitData, coarse: &RivConfig) -> Option<Ad
 /// Splits modes of a refined `model` that stand for a close pair (see the module
 /// documentation): every mode whose neighbourhood (`cfg.window_half_widths` half-power
 /// half-widths either side, at least `cfg.min_window` relative) holds a mean residual
-/// statistic at least `cfg.min_excess` times the band's median is tried, the largest
+/// statistic at least `cfg.min_excess` times the band's lower quintile is tried, the largest
 /// local residual energy first, with a second mode at the neighbourhood's largest
 /// residual line and one half-width on either side of it (the trials run in parallel).
 /// The best trial by cost is kept when the cost falls significantly (F test at
@@ -269,7 +275,7 @@ pub fn split_close_pairs(
     let mut tried: Vec<f64> = Vec::new();
     while report.splits.len() < cfg.max_changes {
         let stats = ResidualStats::new(&cur, data);
-        let med = median_t(&stats);
+        let med = floor_t(&stats);
         if !(med > 0.0) {
             break;
         }
@@ -383,7 +389,7 @@ pub fn split_close_pairs(
 /// calls for it (see the module documentation): the lines within `cfg.edge_zone`
 /// (relative) of the upper edge (and of the lower one when the model has no rigid body:
 /// below the band, a mode of a free body is the suspension stiffness) must hold a mean
-/// residual statistic at least `cfg.min_excess` times the band's median. Trials start a
+/// residual statistic at least `cfg.min_excess` times the band's lower quintile. Trials start a
 /// mode at `cfg.edge_ratios` beyond the edge with damping `cfg.edge_zeta`, and a constant
 /// feedthrough in its place (when the model has none); all are settled by Algorithm 1 in
 /// parallel. The best mode trial that settled beyond the edge (within `cfg.band_margin`)
@@ -407,7 +413,7 @@ pub fn add_out_of_band_mode(
     let mut cur = model;
     for (edge, fe) in edges {
         let stats = ResidualStats::new(&cur, data);
-        let med = median_t(&stats);
+        let med = floor_t(&stats);
         let (a, b) = if edge == "upper" {
             lines_within(data, fe / (1.0 + cfg.edge_zone), fe)
         } else {
@@ -516,4 +522,178 @@ pub fn add_out_of_band_mode(
         }
     }
     Ok((cur, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frf_data::{Frf, Weighting};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// A 2 x 3 continuous plant with the given modes (f Hz, zeta, output shape, input
+    /// shape) and an optional constant feedthrough, measured at 0.25 Hz lines over
+    /// `lo..hi` Hz with complex Gaussian noise of 0.1 % of each value (its variance
+    /// attached).
+    fn measured(
+        modes: &[(f64, f64, [f64; 2], [f64; 3])],
+        feedthrough: Option<f64>,
+        lo: f64,
+        hi: f64,
+        seed: u64,
+    ) -> Frf {
+        let (ny, nu) = (2, 3);
+        let mut m = AdditiveModel::new(ny, nu, Domain::Continuous).unwrap();
+        for &(f, z, c, b) in modes {
+            let i = m.push_mode(f, z, false).unwrap();
+            for r in 0..ny {
+                for k in 0..nu {
+                    m.submodels[i].num[0][(r, k)] = c[r] * b[k];
+                }
+            }
+        }
+        if let Some(d) = feedthrough {
+            let i = m.push_feedthrough().unwrap();
+            for r in 0..ny {
+                for k in 0..nu {
+                    m.submodels[i].num[0][(r, k)] = d * (1.0 + 0.3 * (r + 2 * k) as f64);
+                }
+            }
+        }
+        let n = ((hi - lo) / 0.25) as usize + 1;
+        let f: Vec<f64> = (0..n).map(|k| lo + 0.25 * k as f64).collect();
+        let w: Vec<f64> = f.iter().map(|x| TAU * x).collect();
+        let g = m.response_at(&w);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut vals = g.values.clone();
+        let mut var = Vec::with_capacity(vals.len());
+        for v in vals.iter_mut() {
+            let s2 = (1e-3 * v.norm()).powi(2);
+            let sd = (s2 / 2.0).sqrt();
+            let u1: f64 = rng.random::<f64>().max(1e-300);
+            let u2: f64 = rng.random::<f64>();
+            let r = (-2.0 * u1.ln()).sqrt();
+            *v += C64::new(r * (TAU * u2).cos() * sd, r * (TAU * u2).sin() * sd);
+            var.push(s2);
+        }
+        Frf::new(f, ny, nu, vals, Some(var)).unwrap()
+    }
+
+    /// The refined fit of `data` from modes at `start` (damping 0.01).
+    fn refined(data: &FitData, start: &[f64]) -> AdditiveModel {
+        let mut m = AdditiveModel::new(2, 3, Domain::Continuous).unwrap();
+        for &f in start {
+            m.push_mode(f, 0.01, false).unwrap();
+        }
+        fit_numerators(&mut m, data).unwrap();
+        iterate(m, data, &RivConfig::default()).unwrap().model
+    }
+
+    fn freqs(m: &AdditiveModel) -> Vec<f64> {
+        let mut f: Vec<f64> = m.modes().iter().map(|x| x.f_hz).collect();
+        f.sort_by(|a, b| a.total_cmp(b));
+        f
+    }
+
+    const A: ([f64; 2], [f64; 3]) = ([1.0, 0.4], [1.0, -0.5, 0.3]);
+    const B: ([f64; 2], [f64; 3]) = ([0.3, -1.0], [0.2, 1.0, 0.8]);
+    const C: ([f64; 2], [f64; 3]) = ([1.0, 1.0], [-0.7, 0.4, 1.0]);
+
+    /// A close pair 1.2 % apart (400 and 405 Hz, damping 0.008, different shapes) started
+    /// as one mode: the refined single mode leaves its residual around itself, and the
+    /// split finds both poles.
+    #[test]
+    fn a_merged_close_pair_is_split() {
+        let modes = [
+            (150.0, 0.01, A.0, A.1),
+            (400.0, 0.008, B.0, B.1),
+            (405.0, 0.008, C.0, C.1),
+        ];
+        let frf = measured(&modes, None, 50.0, 700.0, 1);
+        let data = FitData::new(&frf, &Weighting::InverseVariance).unwrap();
+        let merged = refined(&data, &[150.0, 402.5]);
+        assert_eq!(merged.modes().len(), 2);
+        let (m, rep) = split_close_pairs(
+            merged,
+            &data,
+            &RivConfig::default(),
+            &SplitConfig::default(),
+        )
+        .unwrap();
+        let m = iterate(m, &data, &RivConfig::default()).unwrap().model;
+        let f = freqs(&m);
+        assert_eq!(rep.splits.len(), 1, "{rep:?}");
+        assert_eq!(f.len(), 3, "{f:?}");
+        for (got, want) in f.iter().zip([150.0, 400.0, 405.0]) {
+            assert!((got / want - 1.0).abs() < 1e-3, "{f:?}");
+        }
+        // at the noise level: the weighted cost per observation is about 1
+        let v = model_cost(&m, &data) / (data.observations() as f64 / 2.0);
+        assert!(v < 1.2, "cost per observation {v}");
+    }
+
+    /// A mode 6 % above the band's upper edge (530 Hz, band 20..500 Hz, modes at 150 and
+    /// 300 Hz in it): added beyond the edge at its frequency and damping. With a constant
+    /// feedthrough instead (no mode beyond the band), no mode is added: the feedthrough
+    /// fits better. The edge gate is off here (`min_excess` 0): with two modes and six
+    /// entries the in-band modes spread the tail's misfit over the band, and the edge
+    /// zone rises only 1.8 times above the band's lower quintile (the wafer stage's
+    /// 52 entries and 16 modes leave it concentrated at the edge); the trials and their
+    /// tests are what is checked.
+    #[test]
+    fn a_mode_above_the_band_is_added_and_a_feedthrough_is_not_taken_for_one() {
+        let modes = [
+            (150.0, 0.01, A.0, A.1),
+            (300.0, 0.008, B.0, B.1),
+            (530.0, 0.012, C.0, C.1),
+        ];
+        let frf = measured(&modes, None, 20.0, 500.0, 2);
+        let data = FitData::new(&frf, &Weighting::InverseVariance).unwrap();
+        let start = refined(&data, &[150.0, 300.0]);
+        assert!(start.unstable_submodels().is_empty());
+        let cfg = SplitConfig {
+            min_excess: 0.0,
+            ..SplitConfig::default()
+        };
+        let (m, rep) = add_out_of_band_mode(start, &data, &RivConfig::default(), &cfg).unwrap();
+        assert_eq!(rep.out_of_band.len(), 1, "{rep:?}");
+        let o = &rep.out_of_band[0];
+        assert_eq!(o.edge, "upper");
+        let m = iterate(m, &data, &RivConfig::default()).unwrap().model;
+        let last = *m
+            .modes()
+            .iter()
+            .max_by(|a, b| a.f_hz.total_cmp(&b.f_hz))
+            .unwrap();
+        assert!((last.f_hz / 530.0 - 1.0).abs() < 2e-3, "{last:?}");
+        assert!((last.zeta / 0.012 - 1.0).abs() < 0.1, "{last:?}");
+        assert!(o.feedthrough_cost_ratio.is_some_and(|r| r > 2.0), "{o:?}");
+
+        let frf = measured(&modes[..2], Some(2e-8), 20.0, 500.0, 3);
+        let data = FitData::new(&frf, &Weighting::InverseVariance).unwrap();
+        let start = refined(&data, &[150.0, 300.0]);
+        let (_, rep) = add_out_of_band_mode(start, &data, &RivConfig::default(), &cfg).unwrap();
+        assert!(rep.out_of_band.is_empty(), "{rep:?}");
+    }
+
+    /// A fit at the noise level is left alone by both repairs.
+    #[test]
+    fn a_fit_at_the_noise_level_is_left_alone() {
+        let modes = [
+            (150.0, 0.01, A.0, A.1),
+            (400.0, 0.008, B.0, B.1),
+            (405.0, 0.008, C.0, C.1),
+        ];
+        let frf = measured(&modes, None, 50.0, 700.0, 4);
+        let data = FitData::new(&frf, &Weighting::InverseVariance).unwrap();
+        let m = refined(&data, &[150.0, 400.0, 405.0]);
+        let cfg = SplitConfig::default();
+        let (m2, rep) = split_close_pairs(m.clone(), &data, &RivConfig::default(), &cfg).unwrap();
+        assert!(rep.is_empty(), "{rep:?}");
+        assert_eq!(m2, m);
+        let (m3, rep) =
+            add_out_of_band_mode(m.clone(), &data, &RivConfig::default(), &cfg).unwrap();
+        assert!(rep.is_empty(), "{rep:?}");
+        assert_eq!(m3, m);
+    }
 }
