@@ -9,7 +9,8 @@
 //!   is concentrated around that mode (a peak and a phase wiggle on either side), and
 //!   lies under the adaptation's test of a peak over its local median (the misfit raises
 //!   the local median itself). Here every mode whose neighbourhood holds much more
-//!   residual than the band's typical line is tried with a second mode beside it (at the
+//!   residual than the band's quiet lines and than the typical mode's neighbourhood (a
+//!   broadband misfit raises them all) is tried with a second mode beside it (at the
 //!   residual's largest line in the neighbourhood and one half-power half-width on either
 //!   side); the poles are settled by Algorithm 1 (eq. 23), and the best trial is kept
 //!   when its F test passes and it removes most of the local residual.
@@ -43,6 +44,13 @@ pub struct SplitConfig {
     /// lower quintile over the band. Default: 4 (at the noise level the ratio is 1.1 to
     /// 1.5, depending on the number of entries; a merged close pair leaves 10 to 1e4).
     pub min_excess: f64,
+    /// A mode is examined only when the mean statistic of its neighbourhood is also at
+    /// least this factor above that of the typical (median) mode's neighbourhood: a
+    /// broadband misfit (an undeclared delay or lag) raises them all. Default: 4.
+    pub over_typical: f64,
+    /// At most this many modes tried for a split per call (each trial settles the whole
+    /// model). Default: 4.
+    pub max_trials: usize,
     /// Neighbourhood of a mode: this many half-power half-widths `zeta f` either side of
     /// it. Default: 4.
     pub window_half_widths: f64,
@@ -81,6 +89,8 @@ impl Default for SplitConfig {
     fn default() -> Self {
         Self {
             min_excess: 4.0,
+            over_typical: 4.0,
+            max_trials: 4,
             window_half_widths: 4.0,
             min_window: 0.01,
             max_local_ratio: 0.25,
@@ -254,9 +264,11 @@ fn settle(mut m: AdditiveModel, data: &FitData, coarse: &RivConfig) -> Option<Ad
 /// Splits modes of a refined `model` that stand for a close pair (see the module
 /// documentation): every mode whose neighbourhood (`cfg.window_half_widths` half-power
 /// half-widths either side, at least `cfg.min_window` relative) holds a mean residual
-/// statistic at least `cfg.min_excess` times the band's lower quintile is tried, the largest
-/// local residual energy first, with a second mode at the neighbourhood's largest
-/// residual line and one half-width on either side of it (the trials run in parallel).
+/// statistic at least `cfg.min_excess` times the band's lower quintile and
+/// `cfg.over_typical` times the typical mode's neighbourhood is tried (at most
+/// `cfg.max_trials` modes), the largest local residual energy first, with a second mode
+/// at the neighbourhood's largest residual line and one half-width on either side of it
+/// (the trials run in parallel).
 /// The best trial by cost is kept when the cost falls significantly (F test at
 /// `cfg.alpha`, at least `cfg.min_f`, noise scale from the trial's residual), no two
 /// poles coincide, and the neighbourhood keeps at most `cfg.max_local_ratio` of its
@@ -273,14 +285,15 @@ pub fn split_close_pairs(
     let mut cur = model;
     // modes already tried (frequency before the trial): not tried again
     let mut tried: Vec<f64> = Vec::new();
+    let mut n_tried = 0;
     while report.splits.len() < cfg.max_changes {
         let stats = ResidualStats::new(&cur, data);
         let med = floor_t(&stats);
         if !(med > 0.0) {
             break;
         }
-        // (f, zeta, window lines, local energy)
-        let mut cands: Vec<(f64, f64, (usize, usize), f64)> = (0..cur.submodels.len())
+        // (f, zeta, window lines, local energy, mean statistic)
+        let mut cands: Vec<(f64, f64, (usize, usize), f64, f64)> = (0..cur.submodels.len())
             .filter(|&i| cur.submodels[i].kind == SubmodelKind::Mode)
             .filter_map(|i| {
                 let (f, zeta) = pole_of(&cur, i)?;
@@ -295,15 +308,29 @@ pub fn split_close_pairs(
                     return None;
                 }
                 let mean = stats.t[a..b].iter().sum::<f64>() / (b - a) as f64;
-                (mean >= cfg.min_excess * med).then(|| (f, zeta, (a, b), energy(&stats, a, b)))
+                Some((f, zeta, (a, b), energy(&stats, a, b), mean))
             })
             .collect();
-        if cands.is_empty() {
+        // a misfit that raises every mode's neighbourhood alike (a delay, a lag, a
+        // hold) is broadband, not a merged pair: a candidate must stand out from the
+        // typical neighbourhood as well as from the band's quiet lines
+        let mut means: Vec<f64> = cands.iter().map(|c| c.4).collect();
+        means.sort_by(|x, y| x.total_cmp(y));
+        // the lower median (a model of two modes, one of them merged, has the other as
+        // its typical neighbourhood); none with a single mode
+        let typical = if means.len() >= 2 {
+            means[(means.len() - 1) / 2]
+        } else {
+            0.0
+        };
+        cands.retain(|c| c.4 >= cfg.min_excess * med && c.4 >= cfg.over_typical * typical);
+        if cands.is_empty() || n_tried >= cfg.max_trials {
             break;
         }
         cands.sort_by(|x, y| y.3.total_cmp(&x.3));
-        let (f, zeta, (a, b), e0) = cands[0];
+        let (f, zeta, (a, b), e0, _) = cands[0];
         tried.push(f);
+        n_tried += 1;
         let hw = zeta.abs().max(1e-3) * f;
         // the residual's largest line in the neighbourhood, when off the mode itself
         let kmax = (a..b)
