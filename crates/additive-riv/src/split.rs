@@ -261,6 +261,10 @@ fn settle(mut m: AdditiveModel, data: &FitData, coarse: &RivConfig) -> Option<Ad
         .then_some(fit.model)
 }
 
+/// A mode's neighbourhood: (frequency in Hz, damping, its lines `a..b`, the weighted
+/// residual energy there, the mean per-line statistic there).
+type Zone = (f64, f64, (usize, usize), f64, f64);
+
 /// Splits modes of a refined `model` that stand for a close pair (see the module
 /// documentation): every mode whose neighbourhood (`cfg.window_half_widths` half-power
 /// half-widths either side, at least `cfg.min_window` relative) holds a mean residual
@@ -289,11 +293,10 @@ pub fn split_close_pairs(
     while report.splits.len() < cfg.max_changes {
         let stats = ResidualStats::new(&cur, data);
         let med = floor_t(&stats);
-        if !(med > 0.0) {
+        if med.is_nan() || med <= 0.0 {
             break;
         }
-        // (f, zeta, window lines, local energy, mean statistic)
-        let mut cands: Vec<(f64, f64, (usize, usize), f64, f64)> = (0..cur.submodels.len())
+        let mut cands: Vec<Zone> = (0..cur.submodels.len())
             .filter(|&i| cur.submodels[i].kind == SubmodelKind::Mode)
             .filter_map(|i| {
                 let (f, zeta) = pole_of(&cur, i)?;
@@ -446,7 +449,7 @@ pub fn add_out_of_band_mode(
         } else {
             lines_within(data, fe, fe * (1.0 + cfg.edge_zone))
         };
-        if b - a < 3 || !(med > 0.0) {
+        if b - a < 3 || med.is_nan() || med <= 0.0 {
             continue;
         }
         let mean = stats.t[a..b].iter().sum::<f64>() / (b - a) as f64;
