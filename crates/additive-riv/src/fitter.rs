@@ -82,6 +82,10 @@ pub struct FitterReport {
     pub init_cost: f64,
     /// Mode additions and removals.
     pub adapt: Option<AdaptReport>,
+    /// Close pairs split and modes added beyond a band edge after the refinement
+    /// ([`crate::split`]); `None` when the repairs did not run.
+    #[serde(default)]
+    pub repair: Option<crate::split::RepairReport>,
     /// Band fitted, Hz.
     pub band_hz: (f64, f64),
 }
@@ -206,6 +210,7 @@ impl AdditiveFitter {
         let report = FitterReport {
             cmif_peaks: ir.cmif_peaks,
             delay_estimate: ir.delay_estimate,
+            repair: None,
             integrators: ir.integrators,
             weighting: ir.weighting,
             init_cost: ir.init_cost,

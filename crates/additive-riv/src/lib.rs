@@ -40,6 +40,7 @@ pub mod problem;
 pub mod riv;
 pub mod significance;
 pub mod small;
+pub mod split;
 pub mod step;
 pub mod structure;
 

@@ -266,7 +266,7 @@ pub fn local_energy(stats: &ResidualStats, data: &FitData, f_hz: f64, half_hz: f
 
 /// Line spacing of the data near `f_hz` (Hz).
 /// The spacing (Hz) of the lines of `data` around `f_hz`.
-pub(crate) fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
+pub fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
     let w = TAU * f_hz;
     let k = data.omega.partition_point(|&x| x < w).min(data.n - 1);
     let (a, b) = if k == 0 {

@@ -1107,6 +1107,38 @@ fn markdown(
             r.replaced_errors.residual_to_noise
         );
     }
+    if !s.initial.repairs.is_empty() {
+        let list: Vec<String> = s
+            .initial
+            .repairs
+            .iter()
+            .map(|r| {
+                let p = &r.params;
+                let hz =
+                    |v: &serde_json::Value| v.as_f64().map_or("?".into(), |f| format!("{f:.2}"));
+                match r.effect.as_str() {
+                    "out_of_band_mode" => format!(
+                        "`out_of_band_mode` at {} Hz (zeta {}, beyond the {} edge; F = {:.1})",
+                        hz(&p["f_hz"]),
+                        p["zeta"].as_f64().map_or("?".into(), |z| format!("{z:.4}")),
+                        p["edge"].as_str().unwrap_or("?"),
+                        r.f_statistic
+                    ),
+                    _ => format!(
+                        "`{}`: the mode at {} Hz split in two (F = {:.1})",
+                        r.effect,
+                        hz(&p["from_hz"]),
+                        r.f_statistic
+                    ),
+                }
+            })
+            .collect();
+        let _ = writeln!(
+            md,
+            "**First-fit repairs** (modes of the plant, not effects): {}.\n",
+            list.join("; ")
+        );
+    }
 
     // The verdict.
     let _ = writeln!(

@@ -8,7 +8,8 @@
 //!   "command": "diagnose" | "fit",
 //!   "data": {path, ny, nu, lines, band_hz: [lo, hi], units, noise_source},
 //!   "initial": {modes: [{f_hz, zeta}], cmif_peaks: [{f_hz, sv_index, prominence}],
-//!               errors: {median_rel, p95_rel, residual_to_noise}},
+//!               errors: {median_rel, p95_rel, residual_to_noise},
+//!               repairs: [{effect: "out_of_band_mode" | "close_pair", params, f_statistic}]},
 //!   "steps": [{effect, accepted, evidence, params, uncertainty, f_statistic, f_critical,
 //!              added_params, before: {..errors}, after: {..errors}, figure}],
 //!   "verdict": "noise_limited" | "nonlinear_distortion" | "unexplained_residual",
@@ -104,6 +105,12 @@ pub struct InitialSummary {
     /// an effect): where it started and what it replaced.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub restart: Option<RestartSummary>,
+    /// Repairs of the first fit's modal structure after the refinement: `out_of_band_mode`
+    /// (a mode beyond a band edge) and `close_pair` (a mode split into two), with their
+    /// fitted parameters. Part of the first fit, not steps of the loop: they are the
+    /// plant's modes.
+    #[serde(default)]
+    pub repairs: Vec<RepairSummary>,
 }
 
 /// A restart that replaced the chain's first fit because it ended significantly better.
@@ -119,6 +126,19 @@ pub struct RestartSummary {
     pub f_statistic: f64,
     /// Its critical value.
     pub f_critical: f64,
+}
+
+/// One repair of the first fit's modal structure.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RepairSummary {
+    /// `out_of_band_mode` or `close_pair`.
+    pub effect: String,
+    /// Its parameters: `f_hz`, `zeta`, `edge` (and `feedthrough_cost_ratio`, the cost of
+    /// a feedthrough in its place over its own) for an out-of-band mode; `from_hz` and
+    /// `modes` (`[{f_hz, zeta}, {f_hz, zeta}]`) for a close pair.
+    pub params: serde_json::Value,
+    /// F statistic of the added mode's parameters.
+    pub f_statistic: f64,
 }
 
 /// One step of the diagnosis loop: a candidate effect, tested.

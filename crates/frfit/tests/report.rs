@@ -149,6 +149,7 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
             errors: errors(0.12, 3.4, 25.0),
             declared: vec![],
             restart: None,
+            repairs: vec![],
         },
         steps,
         verdict: "noise_limited".into(),

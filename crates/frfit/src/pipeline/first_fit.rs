@@ -99,6 +99,7 @@ pub fn chain_fit(
             m
         }
     };
+    let refined_by_riv = result.chain.last().is_some_and(|l| l == "riv");
     let mut report = FitterReport::default();
     for l in &result.links {
         if let Ok(r) = serde_json::from_value::<CmifInitReport>(l.details.clone()) {
@@ -127,7 +128,7 @@ pub fn chain_fit(
         .flat_map(|l| l.messages.clone())
         .collect();
     messages.extend(result.notes.iter().cloned());
-    let fit = Fit {
+    let mut fit = Fit {
         model,
         report: (),
         cost_history: last.cost_history.clone(),
@@ -146,6 +147,11 @@ pub fn chain_fit(
             .join(" -> "),
         messages,
     };
+    if refined_by_riv {
+        let repair;
+        (fit, repair) = repair_fit(fit, &ctx.fit_data, &fc.riv)?;
+        report.repair = Some(repair);
+    }
     Ok(FirstFit {
         fit,
         report,
@@ -153,4 +159,50 @@ pub fn chain_fit(
         links: result.links,
         chain_runs: result.runs,
     })
+}
+
+/// The repairs of a refined fit that the structure adaptation cannot make
+/// ([`additive_riv::split`]): a mode beyond a band edge (a tail rising towards the edge,
+/// which the loop would otherwise explain by a feedthrough), then close pairs that the
+/// CMIF start merged into one mode. The model and the close pairs are the plant's modal
+/// structure, not effects the model lacks, so they belong to the first fit: the
+/// diagnosis loop then starts at the noise level. When something changed, Algorithm 1
+/// converges fully (`riv`) from the repaired structure; the fit's messages say what was
+/// done.
+fn repair_fit(
+    fit: Fit<AdditiveModel>,
+    data: &additive_riv::FitData,
+    riv: &additive_riv::RivConfig,
+) -> Result<(Fit<AdditiveModel>, additive_riv::split::RepairReport), FrfitError> {
+    use additive_riv::split::{add_out_of_band_mode, split_close_pairs, SplitConfig};
+    let cfg = SplitConfig::default();
+    let (model, mut report) =
+        add_out_of_band_mode(fit.model.clone(), data, riv, &cfg).map_err(err("fit"))?;
+    let (model, pairs) = split_close_pairs(model, data, riv, &cfg).map_err(err("fit"))?;
+    report.splits = pairs.splits;
+    report.rejected.extend(pairs.rejected);
+    if report.is_empty() {
+        return Ok((fit, report));
+    }
+    let refined = iterate(model, data, riv).map_err(err("fit"))?;
+    let mut out = fit;
+    out.model = refined.model;
+    out.cost_history.extend_from_slice(&refined.cost_history);
+    out.iterations += refined.iterations;
+    out.convergence = refined.convergence;
+    out.estimator
+        .push_str(" -> repairs (out-of-band mode, close pairs)");
+    for m in &report.out_of_band {
+        out.messages.push(format!(
+            "added an out-of-band mode at {:.2} Hz (zeta {:.4}, beyond the {} band edge; F = {:.1})",
+            m.f_hz, m.zeta, m.edge, m.f_stat
+        ));
+    }
+    for s in &report.splits {
+        out.messages.push(format!(
+            "split the mode at {:.2} Hz into a close pair at {:.2} and {:.2} Hz (F = {:.1})",
+            s.from_hz, s.into[0].0, s.into[1].0, s.f_stat
+        ));
+    }
+    Ok((out, report))
 }

@@ -412,6 +412,7 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
             errors: run.initial_errors,
             declared: ctx.declared_list.clone(),
             restart: run.restart,
+            repairs: repair_summaries(run.fitter_report.repair.as_ref()),
         },
         steps: run.steps,
         verdict: verdict.into(),
@@ -427,4 +428,34 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
         uncertainty: run.uncertainty,
         distortion: run.distortion,
     }
+}
+
+/// The first fit's repairs ([`additive_riv::split`]) as summary entries.
+fn repair_summaries(r: Option<&additive_riv::split::RepairReport>) -> Vec<RepairSummary> {
+    let Some(r) = r else {
+        return Vec::new();
+    };
+    let mut out: Vec<RepairSummary> = r
+        .out_of_band
+        .iter()
+        .map(|m| RepairSummary {
+            effect: "out_of_band_mode".into(),
+            params: serde_json::json!({
+                "f_hz": m.f_hz,
+                "zeta": m.zeta,
+                "edge": m.edge,
+                "feedthrough_cost_ratio": m.feedthrough_cost_ratio,
+            }),
+            f_statistic: m.f_stat,
+        })
+        .collect();
+    out.extend(r.splits.iter().map(|s| RepairSummary {
+        effect: "close_pair".into(),
+        params: serde_json::json!({
+            "from_hz": s.from_hz,
+            "modes": s.into.iter().map(|(f, z)| serde_json::json!({"f_hz": f, "zeta": z})).collect::<Vec<_>>(),
+        }),
+        f_statistic: s.f_stat,
+    }));
+    out
 }

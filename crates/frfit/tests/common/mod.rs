@@ -139,31 +139,93 @@ pub fn simulated_wafer_with(
     plant_dynamics: Vec<realize::DynamicsFactor>,
     noise_gain: f64,
 ) -> (Frf, Frf) {
+    let (data, clean, _) = simulate(&Sim {
+        period,
+        periods,
+        realizations,
+        distortion,
+        plant_dynamics,
+        noise_gain,
+        ..Sim::default()
+    });
+    (data, clean)
+}
+
+/// A simulated wafer-stage measurement (the plate of `seed`), as `frfit simulate
+/// wafer-stage` makes it.
+#[derive(Debug, Clone)]
+pub struct Sim {
+    /// Seed of the plate, the phases and the noise. Default 3.
+    pub seed: u64,
+    /// Samples per period (10 kHz sampling: 40000 gives lines 0.5 Hz apart). Default
+    /// 40000.
+    pub period: usize,
+    /// Measured periods per realization. Default 10.
+    pub periods: usize,
+    /// Realizations. Default 10.
+    pub realizations: usize,
+    /// Relative level of a stochastic nonlinear contribution. Default 0.
+    pub distortion: f64,
+    /// Undeclared dynamics factors of the plant. Default none.
+    pub plant_dynamics: Vec<realize::DynamicsFactor>,
+    /// Sensor noise (white and drift) over the default 1 nm / 5 nm. Default 1.
+    pub noise_gain: f64,
+    /// Highest excited line, Hz. Default 2000.
+    pub f_max: f64,
+}
+
+impl Default for Sim {
+    fn default() -> Self {
+        Self {
+            seed: 3,
+            period: 40_000,
+            periods: 10,
+            realizations: 10,
+            distortion: 0.0,
+            plant_dynamics: Vec::new(),
+            noise_gain: 1.0,
+            f_max: 2000.0,
+        }
+    }
+}
+
+/// Runs the simulation of `sim`: the frequency-domain estimate commented as `frfit
+/// simulate` writes, the exact response, and the plate's highest true mode, Hz.
+pub fn simulate(sim: &Sim) -> (Frf, Frf, f64) {
     let stage = WaferStageConfig {
-        seed: 3,
+        seed: sim.seed,
         ..WaferStageConfig::default()
     };
+    let (periods, realizations) = (sim.periods, sim.realizations);
     let exp = ExperimentConfig {
-        grid: LineGrid::odd(stage.fs, period, 0.0, 2000.0).unwrap(),
+        grid: LineGrid::odd(stage.fs, sim.period, 0.0, sim.f_max).unwrap(),
         periods,
         realizations,
         transient_periods: 1,
         rms: 2.0,
         output_noise: NoiseConfig {
-            white_rms: 1e-9 * noise_gain,
-            drift_rms: 5e-9 * noise_gain,
+            white_rms: 1e-9 * sim.noise_gain,
+            drift_rms: 5e-9 * sim.noise_gain,
             drift_corner_hz: 0.5,
         },
         input_noise_rms: 0.0,
         cubic_nonlinearity: 0.0,
-        stochastic_distortion: distortion,
+        stochastic_distortion: sim.distortion,
         delay_samples: stage.delay_samples,
         excited_inputs: None,
-        plant_dynamics,
-        seed: 3,
+        plant_dynamics: sim.plant_dynamics.clone(),
+        seed: sim.seed,
         keep_time_signals: false,
     };
     let w = WaferStageExperiment::new(&stage, &ControllerConfig::default(), exp).unwrap();
+    let last = w
+        .stage
+        .truth()
+        .model
+        .modes
+        .iter()
+        .map(|m| m.f_hz)
+        .fold(0.0f64, f64::max);
     let mut est = w
         .experiment
         .estimate(SimulationPath::FrequencyDomain, &EstimatorConfig::default())
@@ -172,7 +234,7 @@ pub fn simulated_wafer_with(
         "sampling 10 kHz; zero-order hold + 1 sample(s) computation delay (150 us)".into(),
         format!("closed-loop indirect estimate, {periods} periods x {realizations} realizations"),
     ];
-    (est.frf, w.experiment.true_frf().unwrap())
+    (est.frf, w.experiment.true_frf().unwrap(), last)
 }
 
 /// The median over lines and entries of `|P - G| / |G|`: the final model of `out`
