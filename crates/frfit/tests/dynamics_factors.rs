@@ -72,7 +72,7 @@ fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
         assert!(accepted(&out, e).is_empty(), "no {e} step");
     }
     assert_eq!(out.summary.verdict, "noise_limited");
-    let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::INFINITY);
+    let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::MAX);
     println!("final model vs noiseless: median {med:.3e}");
     assert!(med <= 1e-4, "median {med:.3e} vs the noiseless response");
 }
@@ -118,7 +118,44 @@ fn a_sensor_mount_resonance_is_a_second_order_factor_on_its_row() {
         17,
         "the plate's 17 modes"
     );
-    let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::INFINITY);
+    let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::MAX);
+    println!("final model vs noiseless: median {med:.3e}");
+    assert!(med <= 1e-4, "median {med:.3e} vs the noiseless response");
+}
+
+/// A pair of undeclared effects: the common amplifier lag (2.5 kHz) and a computation
+/// delay of 0.6 samples (60 us) beyond the declared 150 us. Both are named, the lag on
+/// every input, and the model ends within 1e-4 of the exact response.
+#[test]
+#[ignore = "known failure (issue 12's pairs): the first round's restart from the data's delay takes the lag's low-frequency group delay (64 us) with the 60 us of the delay (delay step of 121.7 us, F = 4.4e8, beating the common lag at F = 2.2e7); the common factor is then not proposed again, and the loop adds a feedthrough and ends unexplained at 15x the noise; run with --ignored"]
+fn a_common_lag_with_an_undeclared_delay_are_both_found() {
+    let f_c = 2500.0;
+    let (data, clean, _) = common::simulate(&common::Sim {
+        period: 20_000,
+        periods: 4,
+        realizations: 10,
+        plant_dynamics: vec![DynamicsFactor::first_order(FactorTarget::All, f_c)],
+        extra_delay_samples: 0.6,
+        ..common::Sim::default()
+    });
+    let out = diagnose(&data, "common lag + delay");
+    let lag = accepted(&out, "input_dynamics");
+    assert_eq!(lag.len(), 1, "one input_dynamics step");
+    assert_eq!(lag[0].params["support"], "all");
+    let pole = lag[0].params["poles"][0]["f_hz"].as_f64().unwrap();
+    assert!(
+        (pole / f_c - 1.0).abs() < 0.03,
+        "lag at {pole:.1} Hz, made at {f_c}"
+    );
+    let delay = accepted(&out, "delay");
+    assert_eq!(delay.len(), 1, "one delay step");
+    let total = out.summary.final_model.delay_s;
+    println!("final delay {:.2} us", total * 1e6);
+    for e in ["feedthrough", "output_dynamics", "missed_mode"] {
+        assert!(accepted(&out, e).is_empty(), "no {e} step");
+    }
+    assert_eq!(out.summary.verdict, "noise_limited");
+    let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::MAX);
     println!("final model vs noiseless: median {med:.3e}");
     assert!(med <= 1e-4, "median {med:.3e} vs the noiseless response");
 }

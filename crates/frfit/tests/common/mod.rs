@@ -172,6 +172,9 @@ pub struct Sim {
     pub noise_gain: f64,
     /// Highest excited line, Hz. Default 2000.
     pub f_max: f64,
+    /// Computation delay beyond the stage's one sample that the comments do not declare,
+    /// samples. Default 0.
+    pub extra_delay_samples: f64,
 }
 
 impl Default for Sim {
@@ -185,6 +188,7 @@ impl Default for Sim {
             plant_dynamics: Vec::new(),
             noise_gain: 1.0,
             f_max: 2000.0,
+            extra_delay_samples: 0.0,
         }
     }
 }
@@ -192,9 +196,11 @@ impl Default for Sim {
 /// Runs the simulation of `sim`: the frequency-domain estimate commented as `frfit
 /// simulate` writes, the exact response, and the plate's highest true mode, Hz.
 pub fn simulate(sim: &Sim) -> (Frf, Frf, f64) {
+    let nominal = WaferStageConfig::default();
     let stage = WaferStageConfig {
         seed: sim.seed,
-        ..WaferStageConfig::default()
+        delay_samples: nominal.delay_samples + sim.extra_delay_samples,
+        ..nominal
     };
     let (periods, realizations) = (sim.periods, sim.realizations);
     let exp = ExperimentConfig {
