@@ -787,12 +787,8 @@ impl SubspaceInit {
         let (mut model, mut cond_res) =
             fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)?;
         let mut cost = weighted_cost(&model, data, &weighting)?;
-        // The integrator test runs with any weighting: its F statistic takes the noise
-        // scale from the refit's own residual, so a misfit makes it stricter, not looser
-        // (noise-free data without a variance: the second state of a double integrator
-        // can sit below the last clear gap of the singular values).
         let significance_tests = match cfg.order_rule {
-            OrderRule::Auto => true,
+            OrderRule::Auto => inverse_variance,
             OrderRule::SingularValues => false,
             OrderRule::FTest => true,
         };
@@ -1029,45 +1025,15 @@ fn sv_proposal(
         )
     } else {
         let (n, gap) = largest_gap(sv, n_max);
-        match last_clear_gap(sv, n, n_max) {
-            Some((n2, gap2)) => (
-                n2,
-                format!(
-                    "last clear gap of the singular values in 1..={n_max}: s_{n2}/s_{} = {:.3e} (the largest, s_{n}/s_{} = {:.3e}, is followed by states {CLEAR_GAP}x above the rest)",
-                    n2 + 1,
-                    gap2,
-                    n + 1,
-                    gap.exp()
-                ),
+        (
+            n,
+            format!(
+                "largest gap of the singular values in 1..={n_max}: s_{n}/s_{} = {:.3e}",
+                n + 1,
+                gap.exp()
             ),
-            None => (
-                n,
-                format!(
-                    "largest gap of the singular values in 1..={n_max}: s_{n}/s_{} = {:.3e}",
-                    n + 1,
-                    gap.exp()
-                ),
-            ),
-        }
+        )
     }
-}
-
-/// A gap between consecutive singular values this large (ratio) beyond the largest one
-/// still separates states from what follows.
-const CLEAR_GAP: f64 = 10.0;
-
-/// Without a noise level, the largest gap can fall inside the states: the weak
-/// directions of rank-2 residues and a rigid body seen at the lowest lines only sit
-/// orders of magnitude below the strong modes yet far above the numerical floor
-/// (noise-free data: a gap of 236 after 24 states, then 6 more states ending in a gap
-/// of 53). Noise makes the singular values after the states dense, so no clear gap
-/// follows them. The last order beyond `n` (the largest gap) up to `n_max` whose gap
-/// `s_k / s_(k+1)` is at least [`CLEAR_GAP`], with that ratio.
-fn last_clear_gap(sv: &[f64], n: usize, n_max: usize) -> Option<(usize, f64)> {
-    (n + 1..=n_max.min(sv.len().saturating_sub(1)))
-        .rev()
-        .find(|&k| sv[k] > 0.0 && sv[k - 1] / sv[k] >= CLEAR_GAP)
-        .map(|k| (k, sv[k - 1] / sv[k]))
 }
 
 /// The result of [`SubspaceInit::flexible_pass`].
