@@ -397,7 +397,7 @@ fn prune_insignificant(
 
 /// True when two modes of `model` sit on practically one pole (closer than
 /// [`crate::structure::DUPLICATE_FRACTION`] of their mean `|Re p|`): not identifiable.
-fn has_duplicate(model: &AdditiveModel) -> bool {
+pub(crate) fn has_duplicate(model: &AdditiveModel) -> bool {
     let poles: Vec<C64> = model
         .submodels
         .iter()

@@ -25,12 +25,13 @@
 //! Both are significance decisions by the F test of the added parameters
 //! ([`crate::significance`]), with the noise scale estimated from the trial's residual.
 
-use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
+use crate::complete::{cost_of, has_duplicate};
+use crate::problem::FitData;
 use crate::riv::{iterate, RivConfig};
 use crate::significance::{f_critical, f_statistic, noise_scale};
-use crate::structure::{line_spacing_near, ResidualStats, DUPLICATE_FRACTION};
+use crate::structure::{line_spacing_near, ResidualStats};
 use crate::{fit_numerators, AdditiveModel, Domain, RivError, SubmodelKind};
-use frf_data::{Convergence, ModelStructure, ProgressSink, C64};
+use frf_data::{Convergence, ModelStructure, ProgressSink};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
@@ -152,11 +153,34 @@ impl RepairReport {
     }
 }
 
-fn model_cost(model: &AdditiveModel, data: &FitData) -> f64 {
-    let lay = Layout::of(model);
-    let basis = Basis::new(model, &lay, &data.omega);
-    let (_, eta) = pack(model, &lay);
-    cost(data, &lay, &basis, &eta, None, &groups(model, &lay))
+/// The tests of a repair trial `t` against `cur` (at cost `v0`): its cost, the F
+/// statistic of the cost decrease per added parameter and its critical value, and the
+/// residual energy left on the lines `a..b` as a fraction of `e0`.
+struct Judged {
+    cost: f64,
+    f: f64,
+    f_critical: f64,
+    local: f64,
+}
+
+fn judge(
+    t: &AdditiveModel,
+    cur: &AdditiveModel,
+    v0: f64,
+    data: &FitData,
+    cfg: &SplitConfig,
+    (a, b): (usize, usize),
+    e0: f64,
+) -> Judged {
+    let vt = cost_of(t, data);
+    let added = t.n_params().saturating_sub(cur.n_params()).max(1);
+    let s2 = noise_scale(vt, data, t.n_params());
+    Judged {
+        cost: vt,
+        f: f_statistic(v0 - vt, added, s2),
+        f_critical: f_critical(added, cfg.alpha).max(cfg.min_f),
+        local: energy(&ResidualStats::new(t, data), a, b) / e0.max(f64::MIN_POSITIVE),
+    }
 }
 
 fn coarse_config(riv: &RivConfig, cfg: &SplitConfig) -> RivConfig {
@@ -195,22 +219,6 @@ fn floor_t(stats: &ResidualStats) -> f64 {
     let mut s = stats.t.clone();
     s.sort_by(|a, b| a.total_cmp(b));
     s[s.len() / 5]
-}
-
-/// True when two modes of `model` sit on practically one pole (closer than
-/// [`DUPLICATE_FRACTION`] of their mean `|Re p|`).
-fn has_duplicate(model: &AdditiveModel) -> bool {
-    let poles: Vec<C64> = model
-        .submodels
-        .iter()
-        .filter(|s| s.kind == SubmodelKind::Mode)
-        .filter_map(|s| model.upper_pole(s))
-        .collect();
-    poles.iter().enumerate().any(|(i, a)| {
-        poles[i + 1..]
-            .iter()
-            .any(|b| (a - b).norm() < DUPLICATE_FRACTION * 0.5 * (a.re.abs() + b.re.abs()))
-    })
 }
 
 fn first_order_numerators(model: &AdditiveModel) -> bool {
@@ -256,9 +264,7 @@ fn settle(mut m: AdditiveModel, data: &FitData, coarse: &RivConfig) -> Option<Ad
     if fit.model.unstable_submodels().len() > unstable_before {
         return None;
     }
-    model_cost(&fit.model, data)
-        .is_finite()
-        .then_some(fit.model)
+    cost_of(&fit.model, data).is_finite().then_some(fit.model)
 }
 
 /// A mode's neighbourhood: (frequency in Hz, damping, its lines `a..b`, the weighted
@@ -344,7 +350,7 @@ pub fn split_close_pairs(
         if (fmax - f).abs() > 0.25 * hw {
             starts.insert(0, fmax);
         }
-        let v0 = model_cost(&cur, data);
+        let v0 = cost_of(&cur, data);
         let base = &cur;
         let trials: Vec<(f64, Option<AdditiveModel>)> = starts
             .par_iter()
@@ -371,12 +377,12 @@ pub fn split_close_pairs(
                 ));
                 continue;
             }
-            let vt = model_cost(&t, data);
-            let added = t.n_params().saturating_sub(cur.n_params()).max(1);
-            let s2 = noise_scale(vt, data, t.n_params());
-            let fstat = f_statistic(v0 - vt, added, s2);
-            let fcrit = f_critical(added, cfg.alpha).max(cfg.min_f);
-            let local = energy(&ResidualStats::new(&t, data), a, b) / e0.max(f64::MIN_POSITIVE);
+            let Judged {
+                cost: vt,
+                f: fstat,
+                f_critical: fcrit,
+                local,
+            } = judge(&t, &cur, v0, data, cfg, (a, b), e0);
             if vt < v0 && fstat > fcrit && local <= cfg.max_local_ratio {
                 if best.as_ref().is_none_or(|(_, vb, _)| vt < *vb) {
                     best = Some((t, vt, fstat));
@@ -456,7 +462,7 @@ pub fn add_out_of_band_mode(
         if mean < cfg.min_excess * med {
             continue;
         }
-        let v0 = model_cost(&cur, data);
+        let v0 = cost_of(&cur, data);
         let e0 = energy(&stats, a, b);
         let starts: Vec<f64> = cfg
             .edge_ratios
@@ -486,7 +492,7 @@ pub fn add_out_of_band_mode(
                 }
                 let mut m = base.clone();
                 m.push_feedthrough().ok()?;
-                settle(m, data, &coarse).map(|m| model_cost(&m, data))
+                settle(m, data, &coarse).map(|m| cost_of(&m, data))
             },
         );
         let mut best: Option<(AdditiveModel, f64, f64, f64, f64)> = None;
@@ -518,12 +524,12 @@ pub fn add_out_of_band_mode(
                 ));
                 continue;
             }
-            let vt = model_cost(&t, data);
-            let added = t.n_params().saturating_sub(cur.n_params()).max(1);
-            let s2 = noise_scale(vt, data, t.n_params());
-            let fstat = f_statistic(v0 - vt, added, s2);
-            let fcrit = f_critical(added, cfg.alpha).max(cfg.min_f);
-            let local = energy(&ResidualStats::new(&t, data), a, b) / e0.max(f64::MIN_POSITIVE);
+            let Judged {
+                cost: vt,
+                f: fstat,
+                f_critical: fcrit,
+                local,
+            } = judge(&t, &cur, v0, data, cfg, (a, b), e0);
             let beats_ft = feed.is_none_or(|vf| vt < vf);
             if vt < v0 && fstat > fcrit && beats_ft {
                 if best.as_ref().is_none_or(|(_, vb, ..)| vt < *vb) {
@@ -603,7 +609,7 @@ mod tests {
             let u1: f64 = rng.random::<f64>().max(1e-300);
             let u2: f64 = rng.random::<f64>();
             let r = (-2.0 * u1.ln()).sqrt();
-            *v += C64::new(r * (TAU * u2).cos() * sd, r * (TAU * u2).sin() * sd);
+            *v += frf_data::C64::new(r * (TAU * u2).cos() * sd, r * (TAU * u2).sin() * sd);
             var.push(s2);
         }
         Frf::new(f, ny, nu, vals, Some(var)).unwrap()
@@ -658,7 +664,7 @@ mod tests {
             assert!((got / want - 1.0).abs() < 1e-3, "{f:?}");
         }
         // at the noise level: the weighted cost per observation is about 1
-        let v = model_cost(&m, &data) / (data.observations() as f64 / 2.0);
+        let v = cost_of(&m, &data) / (data.observations() as f64 / 2.0);
         assert!(v < 1.2, "cost per observation {v}");
     }
 

@@ -57,11 +57,7 @@ impl Trial {
 
 /// The weighted cost `sum w |E|^2` of `model` on `fd`.
 pub fn model_cost(model: &AdditiveModel, fd: &FitData) -> f64 {
-    let lay = additive_riv::problem::Layout::of(model);
-    let basis = additive_riv::problem::Basis::new(model, &lay, &fd.omega);
-    let (_, eta) = additive_riv::problem::pack(model, &lay);
-    let g = additive_riv::problem::groups(model, &lay);
-    additive_riv::problem::cost(fd, &lay, &basis, &eta, None, &g)
+    additive_riv::complete::cost_of(model, fd)
 }
 
 /// The modes of `after` that are not in `before`: each mode of `before` takes the
