@@ -3,10 +3,12 @@
 //! with a message, when `../shared/data` is not beside the checkout; the simulated
 //! systems of `no_false_discovery.rs` exercise the loop without files.
 
+mod common;
+
 use additive_riv::ModeSelection;
 use frf_data::io::read_frf_csv;
 use frf_data::shared_data::require;
-use frf_data::{FrfDataset, ModelStructure};
+use frf_data::FrfDataset;
 use frfit::pipeline::{run, PipelineConfig, PipelineOutput};
 
 fn diagnose(test: &str, name: &str, modes: ModeSelection) -> Option<PipelineOutput> {
@@ -19,24 +21,7 @@ fn diagnose(test: &str, name: &str, modes: ModeSelection) -> Option<PipelineOutp
         ..Default::default()
     };
     let out = run(&data, &path.display().to_string(), &cfg, "diagnose").unwrap();
-    let s = &out.summary;
-    println!("{name}: initial {:?}", s.initial.errors);
-    for st in &s.steps {
-        println!(
-            "  {} accepted={} F={:.3} (crit {:.3}) {} median {:.3e} -> {:.3e}",
-            st.effect,
-            st.accepted,
-            st.f_statistic,
-            st.f_critical,
-            st.params,
-            st.before.median_rel,
-            st.after.median_rel
-        );
-    }
-    println!(
-        "  verdict {}: {}\n  final {:?}, data noise {:?}",
-        s.verdict, s.verdict_evidence, s.final_errors, s.data_noise_median_rel
-    );
+    common::print_steps(name, &out);
     Some(out)
 }
 
@@ -80,17 +65,7 @@ fn nominal_adds_nothing_beyond_the_hold() {
     assert_at_noise_level(&out);
     // the final model against the exact response: as good as declaring the hold
     let clean = read_frf_csv(&clean).unwrap();
-    let clean = clean.band(20.0, 2000.0).unwrap();
-    let g = out.fit.model.response(&clean);
-    let m = clean.n_entries();
-    let mut rel: Vec<f64> = (0..clean.n_lines() * m)
-        .map(|idx| {
-            let t = clean.value(idx / m, idx % m % clean.ny(), idx % m / clean.ny());
-            (g.values[idx] - t).norm() / t.norm()
-        })
-        .collect();
-    rel.sort_by(|a, b| a.total_cmp(b));
-    let median = rel[rel.len() / 2];
+    let median = common::median_rel_vs_truth(&out, &clean, 20.0, 2000.0);
     println!("final model vs noiseless: median {median:.3e}");
     assert!(
         median <= 3e-5,
@@ -190,14 +165,7 @@ fn with_lag(
 
 fn diagnose_frf(data: &frf_data::Frf, name: &str, cfg: PipelineConfig) -> PipelineOutput {
     let out = run(data, name, &cfg, "diagnose").unwrap();
-    let s = &out.summary;
-    for st in s.steps.iter().filter(|s| s.accepted) {
-        println!(
-            "{name}: {} {} median {:.3e} -> {:.3e}",
-            st.effect, st.params, st.before.median_rel, st.after.median_rel
-        );
-    }
-    println!("{name}: verdict {}, final {:?}", s.verdict, s.final_errors);
+    common::print_steps(name, &out);
     out
 }
 

@@ -19,21 +19,7 @@ fn diagnose(data: &Frf, name: &str) -> PipelineOutput {
         ..Default::default()
     };
     let out = run(data, name, &cfg, "diagnose").unwrap();
-    let s = &out.summary;
-    println!("{name}: initial {:?}", s.initial.errors);
-    for st in &s.steps {
-        println!(
-            "  {} accepted={} F={:.1} (crit {:.2}) {} median {:.3e} -> {:.3e}",
-            st.effect,
-            st.accepted,
-            st.f_statistic,
-            st.f_critical,
-            st.params,
-            st.before.median_rel,
-            st.after.median_rel
-        );
-    }
-    println!("  verdict {}, final {:?}", s.verdict, s.final_errors);
+    common::print_steps(name, &out);
     out
 }
 

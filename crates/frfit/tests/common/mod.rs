@@ -264,3 +264,26 @@ pub fn median_rel_vs_truth(
     rel.sort_by(|a, b| a.total_cmp(b));
     rel[rel.len() / 2]
 }
+
+/// Prints the first fit's errors, every step of the diagnosis of `out` and its verdict,
+/// under `name`.
+pub fn print_steps(name: &str, out: &frfit::pipeline::PipelineOutput) {
+    let s = &out.summary;
+    println!("{name}: initial {:?}", s.initial.errors);
+    for st in &s.steps {
+        println!(
+            "  {} accepted={} F={:.3} (crit {:.3}) {} median {:.3e} -> {:.3e}",
+            st.effect,
+            st.accepted,
+            st.f_statistic,
+            st.f_critical,
+            st.params,
+            st.before.median_rel,
+            st.after.median_rel
+        );
+    }
+    println!(
+        "  verdict {}: {}\n  final {:?}, data noise {:?}",
+        s.verdict, s.verdict_evidence, s.final_errors, s.data_noise_median_rel
+    );
+}
