@@ -278,6 +278,13 @@ fn round(
             .iter()
             .map(|t| current.cost - t.cost)
             .fold(0.0_f64, f64::max);
+        // a screened cost bounds the converged one from above, so the lowest cost of a
+        // passing trial is one the round's best reaches at least
+        let best_cost = trials
+            .iter()
+            .filter(|t| t.passes())
+            .map(|t| t.cost)
+            .fold(f64::INFINITY, f64::min);
         trials
             .into_par_iter()
             .filter_map(|mut t| {
@@ -285,14 +292,27 @@ fn round(
                     return Some(t);
                 };
                 let drop = current.cost - t.cost;
-                if drop >= SCREEN_KEEP * best_drop {
+                let reachable = sc
+                    .remaining
+                    .is_none_or(|r| t.cost - SCREEN_MARGIN * r <= best_cost);
+                if drop >= SCREEN_KEEP * best_drop && reachable {
                     return trial::finish(ctx, cfg, riv, &current, t);
                 }
+                let why = if reachable {
+                    format!(
+                        "{:.2}% of the round's best cost decrease",
+                        100.0 * drop / best_drop.max(f64::MIN_POSITIVE)
+                    )
+                } else {
+                    format!(
+                        "a cost {:.3e} times the round's best passing trial, and its decreases extrapolate to at most {:.3e} of its cost more",
+                        t.cost / best_cost,
+                        SCREEN_MARGIN * sc.remaining.unwrap_or(f64::NAN) / t.cost
+                    )
+                };
                 t.evidence = format!(
-                    "{}; screened: the refit stopped after {} iterations with {:.2}% of the round's best cost decrease, so it cannot be the round's best and was not refitted to convergence",
-                    t.evidence,
-                    sc.iterations,
-                    100.0 * drop / best_drop.max(f64::MIN_POSITIVE)
+                    "{}; screened: the refit stopped after {} iterations with {why}, so it cannot be the round's best and was not refitted to convergence",
+                    t.evidence, sc.iterations,
                 );
                 t.screened = None;
                 Some(t)
@@ -328,6 +348,12 @@ const SCREEN_ITERATIONS: usize = 4;
 /// The fraction of the round's best cost decrease a screened refit must reach to be
 /// refitted to convergence.
 const SCREEN_KEEP: f64 = 0.25;
+
+/// How many times its extrapolated remaining decrease ([`trial::remaining_decrease`]) a
+/// screened refit is granted: it continues only when its cost, lowered by that much,
+/// reaches the round's best passing cost (the extrapolation assumes geometrically
+/// shrinking decreases; the margin covers refits that settle more slowly).
+const SCREEN_MARGIN: f64 = 3.0;
 
 /// One trial of a round, run on its own thread.
 enum Job {

@@ -46,6 +46,10 @@ pub struct Screened {
     pub evidence: String,
     /// Iterations run.
     pub iterations: usize,
+    /// The cost decrease still to come, extrapolated from the refit's cost history
+    /// ([`remaining_decrease`]), in units of [`Trial::cost`]; `None` when its decreases
+    /// do not shrink.
+    pub remaining: Option<f64>,
 }
 
 impl Trial {
@@ -110,7 +114,7 @@ fn refit(
     model: AdditiveModel,
     fd: &FitData,
     riv: &RivConfig,
-) -> Result<(AdditiveModel, f64, usize, bool), FrfitError> {
+) -> Result<Refitted, FrfitError> {
     let mut m = model;
     fit_numerators(&mut m, fd).map_err(err("refit"))?;
     let f = iterate(m, fd, riv).map_err(err("refit"))?;
@@ -126,7 +130,50 @@ fn refit(
     }
     let capped = matches!(f.convergence, frf_data::Convergence::MaxIterations { .. });
     let c = model_cost(&f.model, fd);
-    Ok((f.model, c, f.iterations, !capped))
+    // the history's costs are the iterations' own scale: the extrapolated decrease is
+    // carried over as a fraction of the last one
+    let last = f.cost_history.last().copied().unwrap_or(f64::NAN);
+    let remaining = remaining_decrease(&f.cost_history).map(|r| r / last * c);
+    Ok(Refitted {
+        model: f.model,
+        cost: c,
+        iterations: f.iterations,
+        capped,
+        remaining,
+    })
+}
+
+/// A refit's result.
+struct Refitted {
+    model: AdditiveModel,
+    /// Its weighted cost.
+    cost: f64,
+    iterations: usize,
+    /// Whether it stopped at its iteration cap before converging.
+    capped: bool,
+    /// The decrease still to come ([`remaining_decrease`]), in units of `cost`.
+    remaining: Option<f64>,
+}
+
+/// The largest ratio of successive cost decreases [`remaining_decrease`] extrapolates
+/// with: decreases that shrink more slowly than this are not settling.
+const MAX_DECREASE_RATIO: f64 = 0.9;
+
+/// The cost decrease still to come of iterations stopped before convergence, from their
+/// cost `history`: the per-iteration decreases extrapolated as a geometric series with
+/// the ratio `r` of the last two, `d r / (1 - r)` for the last decrease `d`. `None` with
+/// fewer than three costs, a non-finite cost, or decreases that do not shrink (`r` above
+/// [`MAX_DECREASE_RATIO`], or a cost that rose): then nothing bounds what is left.
+pub fn remaining_decrease(history: &[f64]) -> Option<f64> {
+    let [.., a, b, c] = history else {
+        return None;
+    };
+    let (d1, d2) = (a - b, b - c);
+    if !(d1.is_finite() && d2.is_finite()) || d1 <= 0.0 || d2 < 0.0 {
+        return None;
+    }
+    let r = d2 / d1;
+    (r <= MAX_DECREASE_RATIO).then(|| d2 * r / (1.0 - r))
 }
 
 /// What every trial of a round is tested against.
@@ -272,11 +319,18 @@ pub fn refit_candidate(
         max_iterations: cap.map_or(riv.max_iterations, |c| c.min(riv.max_iterations)),
         ..riv.clone()
     };
-    let (m, c, iterations, converged) = refit(aug, fd, &riv_capped).ok()?;
-    let screened = (cap.is_some() && !converged).then(|| Screened {
+    let Refitted {
+        model: m,
+        cost: c,
+        iterations,
+        capped,
+        remaining,
+    } = refit(aug, fd, &riv_capped).ok()?;
+    let screened = (cap.is_some() && capped).then(|| Screened {
         candidate: candidate.clone(),
         evidence: evidence.clone(),
         iterations,
+        remaining,
     });
     let mut tr = judge(cfg, fd, current, &candidate, evidence, m, c);
     tr.screened = screened;
@@ -346,5 +400,29 @@ fn judge(
         added,
         joint_modes: Vec::new(),
         screened: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::remaining_decrease;
+
+    #[test]
+    fn a_geometric_cost_history_extrapolates_to_its_limit() {
+        // costs 1 + 8 (1/2)^k: decreases 4, 2, 1, ... sum to 8 from the start
+        let history: Vec<f64> = (0..4).map(|k| 1.0 + 8.0 * 0.5_f64.powi(k)).collect();
+        let left = remaining_decrease(&history).unwrap();
+        let limit = history[3] - 1.0;
+        assert!((left - limit).abs() < 1e-12, "{left} vs {limit}");
+    }
+
+    #[test]
+    fn decreases_that_do_not_shrink_bound_nothing() {
+        assert_eq!(remaining_decrease(&[10.0, 9.0, 8.0]), None);
+        assert_eq!(remaining_decrease(&[10.0, 9.0, 9.5]), None);
+        assert_eq!(remaining_decrease(&[10.0, 9.0]), None);
+        assert_eq!(remaining_decrease(&[10.0, f64::NAN, 8.0]), None);
+        // converged: nothing left
+        assert_eq!(remaining_decrease(&[10.0, 9.0, 9.0]), Some(0.0));
     }
 }
