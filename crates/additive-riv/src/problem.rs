@@ -267,7 +267,8 @@ pub struct Basis {
     /// `Im d_d(k)` at `[d * n + k]`.
     pub d_im: Vec<f64>,
     /// The factor of each entry `F_ke` (known factor times dynamics factors) at
-    /// `[e * n + k]`.
+    /// `[f_offset(e) + k]`: one row per entry with dynamics factors, else one row that
+    /// every entry shares (the known factor is the same for all).
     pub f: Vec<C64>,
     /// `|F_ke|`.
     pub f_abs: Vec<f64>,
@@ -302,7 +303,9 @@ impl Basis {
         let mut u_im = vec![0.0; n * lay.n_num];
         let mut d_re = vec![0.0; n * lay.n_den];
         let mut d_im = vec![0.0; n * lay.n_den];
-        let mut f = vec![C64::new(0.0, 0.0); n * m];
+        // without dynamics factors every entry has the known factor: one shared row
+        let f_rows = if model.dynamics.is_empty() { 1 } else { m };
+        let mut f = vec![C64::new(0.0, 0.0); n * f_rows];
         let n_fp = usize::from(lay.fit_delay) + lay.n_factor;
         let mut dlnf = vec![C64::new(0.0, 0.0); n * n_fp];
         let mut dlnf_mask = vec![false; n_fp * m];
@@ -395,7 +398,7 @@ impl Basis {
                     xr *= x;
                 }
             }
-            for e in 0..m {
+            for e in 0..f_rows {
                 f[e * n + k] = f0;
             }
             let mut q = 0;
@@ -463,6 +466,16 @@ impl Basis {
             du_re,
             du_im,
             bypass: model.submodels.iter().map(|s| s.bypass_factor).collect(),
+        }
+    }
+
+    /// Offset of entry `e`'s row in [`Self::f`], [`Self::f_abs`] and [`Self::f_inv`].
+    #[inline]
+    pub fn f_offset(&self, e: usize) -> usize {
+        if self.f.len() > self.n {
+            e * self.n
+        } else {
+            0
         }
     }
 
@@ -561,8 +574,8 @@ impl EntryLines {
         let gr = &data.g_re[e * n..][..n];
         let gi = &data.g_im[e * n..][..n];
         let sw = &data.sqrt_w[e * n..][..n];
-        let fi = &basis.f_inv[e * n..][..n];
-        let fa = &basis.f_abs[e * n..][..n];
+        let fi = &basis.f_inv[basis.f_offset(e)..][..n];
+        let fa = &basis.f_abs[basis.f_offset(e)..][..n];
         {
             let (yr, yi, s) = (&mut self.y_re[..n], &mut self.y_im[..n], &mut self.s[..n]);
             for k in 0..n {
@@ -647,7 +660,8 @@ pub fn cost(
                 total += el.cost();
                 for k in 0..n {
                     // E of the undivided problem: F (y - P)
-                    r[k * m + e] = basis.f[e * n + k] * C64::new(el.e_re[k], el.e_im[k]);
+                    r[k * m + e] =
+                        basis.f[basis.f_offset(e) + k] * C64::new(el.e_re[k], el.e_im[k]);
                 }
             }
             total

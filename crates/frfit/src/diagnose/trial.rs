@@ -110,11 +110,7 @@ pub fn f_test(
 /// Refits a candidate: numerators (eq. 24), then Algorithm 1 to a coarse tolerance.
 /// Returns the model, its cost, the iterations run and whether they converged (not
 /// stopped by the iteration cap).
-fn refit(
-    model: AdditiveModel,
-    fd: &FitData,
-    riv: &RivConfig,
-) -> Result<Refitted, FrfitError> {
+fn refit(model: AdditiveModel, fd: &FitData, riv: &RivConfig) -> Result<Refitted, FrfitError> {
     let mut m = model;
     fit_numerators(&mut m, fd).map_err(err("refit"))?;
     let f = iterate(m, fd, riv).map_err(err("refit"))?;
