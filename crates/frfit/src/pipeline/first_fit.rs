@@ -45,7 +45,91 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
             chain_runs: Vec::new(),
         });
     }
-    chain_fit(ctx, cfg, &ctx.fitter_config(cfg))
+    let first = chain_fit(ctx, cfg, &ctx.fitter_config(cfg))?;
+    second_start(ctx, cfg, first)
+}
+
+/// The initialiser of the second start ([`second_start`]): Sanathanan-Koerner, whose
+/// common denominator sees every mode of the band at once (no peak picking), so it
+/// separates close pairs and weak modes that the CMIF start merges or misses.
+pub const SECOND_START: &str = "sk";
+
+/// A default chain whose refinement did not converge (its iterations failed or ran out)
+/// started too far from an optimum: the same refiner from the [`SECOND_START`]
+/// initialiser is run, and the fit with the smaller final prediction error (the weighted
+/// cost corrected for the parameters spent, as between the chains of `--init A,B`) is
+/// the first fit. A better second start is a better first fit, not an effect: the
+/// fit's messages and `chain_runs` say which chains ran and which was kept. Nothing
+/// changes when `--init` was given (an explicit choice is kept), when the first chain's
+/// initialiser is the second start's own, or when the first fit converged.
+fn second_start(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    first: FirstFit,
+) -> Result<FirstFit, FrfitError> {
+    let converged = !matches!(
+        first.fit.convergence,
+        frf_data::Convergence::Failed { .. } | frf_data::Convergence::MaxIterations { .. }
+    );
+    if converged
+        || !cfg.init.trim().is_empty()
+        || first.chain.first().is_none_or(|i| i == SECOND_START)
+    {
+        return Ok(first);
+    }
+    let second_cfg = PipelineConfig {
+        init: SECOND_START.to_string(),
+        refine: first.chain.last().cloned().unwrap_or_default(),
+        ..cfg.clone()
+    };
+    let fd = &ctx.fit_data;
+    let fpe = |m: &AdditiveModel| {
+        let n = 2.0 * (fd.n * fd.ny * fd.nu) as f64;
+        let p = frf_data::ModelStructure::n_params(m) as f64;
+        let v = additive_riv::complete::cost_of(m, fd);
+        if n > p && v.is_finite() {
+            v * (n + p) / (n - p)
+        } else {
+            f64::INFINITY
+        }
+    };
+    let run_of = |f: &FirstFit, fpe: f64, kept: bool| crate::chain::ChainRun {
+        chain: f.chain.clone(),
+        cost: Some(additive_riv::complete::cost_of(&f.fit.model, fd)),
+        n_params: Some(frf_data::ModelStructure::n_params(&f.fit.model)),
+        fpe: Some(fpe),
+        error: None,
+        kept,
+    };
+    let why = first.fit.convergence.describe();
+    let fpe_first = fpe(&first.fit.model);
+    let second = match chain_fit(ctx, &second_cfg, &ctx.fitter_config(&second_cfg)) {
+        Ok(s) => s,
+        Err(e) => {
+            let mut first = first;
+            first.fit.messages.push(format!(
+                "second start: the {} chain did not converge ({why}); the {SECOND_START} chain from the start failed ({e}), so the first chain's fit is kept",
+                first.chain.join(" -> ")
+            ));
+            return Ok(first);
+        }
+    };
+    let fpe_second = fpe(&second.fit.model);
+    let keep_second = fpe_second < fpe_first;
+    let runs = vec![
+        run_of(&first, fpe_first, !keep_second),
+        run_of(&second, fpe_second, keep_second),
+    ];
+    let note = format!(
+        "second start: the {} chain did not converge ({why}); the {} chain from the start ended with final prediction error {fpe_second:.4e} against {fpe_first:.4e}: {} kept",
+        first.chain.join(" -> "),
+        second.chain.join(" -> "),
+        if keep_second { "it is" } else { "the first is" }
+    );
+    let mut kept = if keep_second { second } else { first };
+    kept.fit.messages.push(note);
+    kept.chain_runs = runs;
+    Ok(kept)
 }
 
 /// The estimator chain `cfg.init -> cfg.refine` on the band of `ctx` with the fitter
