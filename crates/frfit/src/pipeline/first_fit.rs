@@ -6,7 +6,7 @@ use crate::chain::{run_chain, AdditiveOptions};
 use crate::FrfitError;
 use additive_riv::riv::iterate;
 use additive_riv::{fit_numerators, AdditiveModel, CmifInitReport, FitterReport, RivReport};
-use frf_data::{ChainSettings, Fit, LinkReport, Precomputed};
+use frf_data::{ChainSettings, Fit, LinkReport, ModelStructure, Precomputed};
 
 /// The first fit of a run and where it came from.
 pub struct FirstFit {
@@ -54,8 +54,14 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
 /// separates close pairs and weak modes that the CMIF start merges or misses.
 pub const SECOND_START: &str = "sk";
 
+/// The residual-to-noise ratio (root mean square of the residual over the noise level)
+/// above which `frfit fit` runs the second start even after a converged refinement.
+pub const SECOND_START_RESIDUAL: f64 = 3.0;
+
 /// A default chain whose refinement did not converge (its iterations failed or ran out)
-/// started too far from an optimum: the same refiner from the [`SECOND_START`]
+/// started too far from an optimum, and so did one that `frfit fit` (no diagnosis)
+/// leaves with a residual more than [`SECOND_START_RESIDUAL`] times the noise: the same
+/// refiner from the [`SECOND_START`]
 /// initialiser is run, and the fit with the smaller final prediction error (the weighted
 /// cost corrected for the parameters spent, as between the chains of `--init A,B`) is
 /// the first fit. A better second start is a better first fit, not an effect: the
@@ -71,7 +77,14 @@ fn second_start(
         first.fit.convergence,
         frf_data::Convergence::Failed { .. } | frf_data::Convergence::MaxIterations { .. }
     );
-    if converged
+    // `fit` has no loop to trace a residual far above the noise: a start that left it
+    // there is poor too (the diagnosis's loop tests effects for it instead)
+    let far_from_noise = !cfg.diagnose && {
+        let response = first.fit.model.response_at(&ctx.omega);
+        super::error_stats(&ctx.band, &response, &ctx.noise).residual_to_noise
+            > SECOND_START_RESIDUAL
+    };
+    if (converged && !far_from_noise)
         || !cfg.init.trim().is_empty()
         || first.chain.first().is_none_or(|i| i == SECOND_START)
     {
@@ -101,14 +114,26 @@ fn second_start(
         error: None,
         kept,
     };
-    let why = first.fit.convergence.describe();
+    let why = if converged {
+        format!(
+            "left a residual {:.1} times the noise level",
+            super::error_stats(
+                &ctx.band,
+                &first.fit.model.response_at(&ctx.omega),
+                &ctx.noise
+            )
+            .residual_to_noise
+        )
+    } else {
+        format!("did not converge ({})", first.fit.convergence.describe())
+    };
     let fpe_first = fpe(&first.fit.model);
     let second = match chain_fit(ctx, &second_cfg, &ctx.fitter_config(&second_cfg)) {
         Ok(s) => s,
         Err(e) => {
             let mut first = first;
             first.fit.messages.push(format!(
-                "second start: the {} chain did not converge ({why}); the {SECOND_START} chain from the start failed ({e}), so the first chain's fit is kept",
+                "second start: the {} chain {why}; the {SECOND_START} chain from the start failed ({e}), so the first chain's fit is kept",
                 first.chain.join(" -> ")
             ));
             return Ok(first);
@@ -121,7 +146,7 @@ fn second_start(
         run_of(&second, fpe_second, keep_second),
     ];
     let note = format!(
-        "second start: the {} chain did not converge ({why}); the {} chain from the start ended with final prediction error {fpe_second:.4e} against {fpe_first:.4e}: {} kept",
+        "second start: the {} chain {why}; the {} chain from the start ended with final prediction error {fpe_second:.4e} against {fpe_first:.4e}: {} kept",
         first.chain.join(" -> "),
         second.chain.join(" -> "),
         if keep_second { "it is" } else { "the first is" }

@@ -110,10 +110,11 @@ pub struct PipelineConfig {
     /// initialisation.
     pub start_model: Option<AdditiveModel>,
     /// The initialiser of the chain (see [`crate::chain::INITIALIZERS`]); empty: by the
-    /// size of the data ([`default_chain`]). Default: `cmif`.
+    /// size of the data ([`default_chain`]: `cmif` up to 100 entries), with the second
+    /// start of [`first_fit`] when that chain's fit is poor. Default: empty.
     pub init: String,
     /// The refiner of the chain (see [`crate::chain::REFINERS`]); empty: by the size of
-    /// the data ([`default_chain`]). Default: `riv`.
+    /// the data ([`default_chain`]: `riv` up to 100 entries). Default: empty.
     pub refine: String,
     /// Model order (number of states) for initialisers that take one (SK, subspace);
     /// `None` lets them choose it from the data. Default: `None`.
@@ -141,8 +142,8 @@ impl Default for PipelineConfig {
             alpha: 1e-3,
             min_f: 25.0,
             start_model: None,
-            init: "cmif".into(),
-            refine: "riv".into(),
+            init: String::new(),
+            refine: String::new(),
             order: None,
             sk_bands: None,
             progress: ProgressSink::none(),
