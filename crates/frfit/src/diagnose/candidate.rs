@@ -357,6 +357,76 @@ fn local_modes(
     out
 }
 
+/// A second-order factor above the band on the residual's dominant output row (`rows`)
+/// or input column: a sensor's or actuator's mount resonance beyond the top line shows
+/// in the band only as that row's magnitude rise `1 / (1 - (f / f_r)^2)` with little
+/// phase, which the first fit's residues partly absorb (the residual's templates then
+/// see a phase-like remainder and propose a first-order lead). No residual peak or local
+/// mode calls for it, so its start is screened here: natural frequencies on a log grid
+/// from [`ABOVE_BAND`] times the top line, damping 0.005..0.2, by the cost after the
+/// numerator fit (eq. 24, one convex fit per point), refined by
+/// [`screen_second_order`]. The refit and its F test decide. `(row or column, start)`.
+fn above_band(
+    model: &AdditiveModel,
+    an: &ResidualAnalysis,
+    fd: &FitData,
+    rows: bool,
+) -> Option<(usize, FactorStart)> {
+    let n = if rows { model.ny() } else { model.nu() };
+    let dominant = if rows {
+        an.concentration.dominant_row
+    } else {
+        an.concentration.dominant_col
+    };
+    let k = dominant.filter(|_| n >= 2 && an.significant)?;
+    let f_hi = an.freq_hz.last().copied().filter(|f| *f > 0.0)?;
+    let target = if rows {
+        FactorTarget::Output(k)
+    } else {
+        FactorTarget::Input(k)
+    };
+    let cost = |f: f64, z: f64| -> f64 {
+        let mut m = model.clone();
+        if m.push_dynamics(DynamicsFactor::second_order(target, f, z))
+            .is_err()
+        {
+            return f64::INFINITY;
+        }
+        additive_riv::fit_numerators(&mut m, fd).unwrap_or(f64::INFINITY)
+    };
+    let (lo, hi) = ABOVE_BAND;
+    let nf = 12;
+    let mut best = (f64::INFINITY, f_hi, 0.03);
+    for a in 0..nf {
+        let f = f_hi * lo * (hi / lo).powf(a as f64 / (nf - 1) as f64);
+        for z in [0.01, 0.05, 0.2] {
+            let c = cost(f, z);
+            if c < best.0 {
+                best = (c, f, z);
+            }
+        }
+    }
+    if !best.0.is_finite() {
+        return None;
+    }
+    let (f_hz, zeta) = screen_second_order(model, target, best.1, best.2, fd)?;
+    // a start that the refinement pulled back into the band is the in-band candidates'
+    (f_hz > f_hi).then_some((
+        k,
+        FactorStart {
+            order: 2,
+            f_hz,
+            zeta,
+            replaces: Vec::new(),
+        },
+    ))
+}
+
+/// The span of [`above_band`]'s frequency grid, in multiples of the top line: from just
+/// above the band to where the rise in the band falls below a few percent of the
+/// factor's own (`(1 / 4)^2` at the top line).
+const ABOVE_BAND: (f64, f64) = (1.05, 4.0);
+
 /// The start of a second-order factor on `target` added to `base`: the frequency and
 /// damping, on a grid of `f_hz` times 0.92..1.08 and damping 0.005..0.2 refined once
 /// around its best point, with the least cost after the numerator fit. `None` when no
@@ -625,6 +695,8 @@ fn propose_dynamics(
         )
     };
     let mut any_support = false;
+    // the keys proposed in this round (a start above the band may repeat a signature's)
+    let mut pushed: Vec<(Effect, String)> = Vec::new();
     for (effect, list, input) in [
         (Effect::InputDynamics, &an.input_dynamics, true),
         (Effect::OutputDynamics, &an.output_dynamics, false),
@@ -654,6 +726,7 @@ fn propose_dynamics(
         if seen(effect, &candidate.key()) {
             continue;
         }
+        pushed.push((effect, candidate.key()));
         push(candidate, ev);
     }
     for (effect, input) in [
@@ -697,8 +770,41 @@ fn propose_dynamics(
                 start.f_hz,
                 start.zeta
             );
+            pushed.push((effect, candidate.key()));
             push(candidate, ev);
         }
+    }
+    for (effect, input) in [
+        (Effect::InputDynamics, true),
+        (Effect::OutputDynamics, false),
+    ] {
+        let Some((k, start)) = above_band(model, an, fd, !input) else {
+            continue;
+        };
+        let which = vec![k + 1];
+        let candidate = if input {
+            Candidate::InputDynamics {
+                inputs: which,
+                start: start.clone(),
+            }
+        } else {
+            Candidate::OutputDynamics {
+                outputs: which,
+                start: start.clone(),
+            }
+        };
+        if seen(effect, &candidate.key()) || pushed.contains(&(effect, candidate.key())) {
+            continue;
+        }
+        let what = if input { "input" } else { "output" };
+        let ev = format!(
+            "the residual concentrates in {what} {}: a resonance of that {what}'s dynamics above the band (top line {:.1} Hz)? second-order factor started at {:.1} Hz, zeta {:.3} (screened by the numerator fit)",
+            k + 1,
+            an.freq_hz.last().copied().unwrap_or(0.0),
+            start.f_hz,
+            start.zeta
+        );
+        push(candidate, ev);
     }
     let common = &an.common_dynamics;
     if (any_support || supported(common)) && model.nu() > 1 {

@@ -5,8 +5,8 @@
 
 use experiment::nonparametric::{EstimatorConfig, LineGrid};
 use experiment::synth::{
-    ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
-    WaferStageExperiment,
+    ClosedLoopExperiment, ControllerConfig, ExperimentConfig, FlexibleMode, NoiseConfig, RigidBody,
+    RigidBodyController, SimulationPath, WaferStage, WaferStageConfig,
 };
 use faer::Mat;
 use frf_data::{Frf, FrfDataset};
@@ -175,6 +175,14 @@ pub struct Sim {
     /// Computation delay beyond the stage's one sample that the comments do not declare,
     /// samples. Default 0.
     pub extra_delay_samples: f64,
+    /// A suspension `(f_hz, zeta)` of the rigid body (the catalogue's `stiffness`): the
+    /// plate's rigid-body residue over `s^2 + 2 zeta w s + w^2` instead of `s^2`.
+    /// Default none (a free plate).
+    pub suspension: Option<(f64, f64)>,
+    /// Modes added to the plate's (a mode the first fit may miss). Default none.
+    pub extra_modes: Vec<FlexibleMode>,
+    /// A feedthrough `D` (4 x 13) of the plant. Default none.
+    pub feedthrough: Option<Mat<f64>>,
 }
 
 impl Default for Sim {
@@ -189,6 +197,9 @@ impl Default for Sim {
             noise_gain: 1.0,
             f_max: 2000.0,
             extra_delay_samples: 0.0,
+            suspension: None,
+            extra_modes: Vec::new(),
+            feedthrough: None,
         }
     }
 }
@@ -223,24 +234,32 @@ pub fn simulate(sim: &Sim) -> (Frf, Frf, f64) {
         seed: sim.seed,
         keep_time_signals: false,
     };
-    let w = WaferStageExperiment::new(&stage, &ControllerConfig::default(), exp).unwrap();
-    let last = w
-        .stage
-        .truth()
-        .model
-        .modes
-        .iter()
-        .map(|m| m.f_hz)
-        .fold(0.0f64, f64::max);
-    let mut est = w
-        .experiment
+    let mut plate = WaferStage::build(&stage).unwrap();
+    let plant = &mut plate.plant;
+    if let Some((f_hz, zeta)) = sim.suspension {
+        let residue = plant.rigid.residue().unwrap().clone();
+        plant.rigid = RigidBody::Suspended {
+            residue,
+            f_hz,
+            zeta,
+        };
+    }
+    plant.modes.extend(sim.extra_modes.iter().cloned());
+    plant.modes.sort_by(|a, b| a.f_hz.total_cmp(&b.f_hz));
+    if let Some(d) = &sim.feedthrough {
+        plant.feedthrough = Some(d.clone());
+    }
+    let last = plant.modes.iter().map(|m| m.f_hz).fold(0.0f64, f64::max);
+    let k = RigidBodyController::design(plant, &ControllerConfig::default(), stage.fs).unwrap();
+    let experiment = ClosedLoopExperiment::new(plant.clone(), k, exp).unwrap();
+    let mut est = experiment
         .estimate(SimulationPath::FrequencyDomain, &EstimatorConfig::default())
         .unwrap();
     est.frf.comments = vec![
         "sampling 10 kHz; zero-order hold + 1 sample(s) computation delay (150 us)".into(),
         format!("closed-loop indirect estimate, {periods} periods x {realizations} realizations"),
     ];
-    (est.frf, w.experiment.true_frf().unwrap(), last)
+    (est.frf, experiment.true_frf().unwrap(), last)
 }
 
 /// The median over lines and entries of `|P - G| / |G|`: the final model of `out`
