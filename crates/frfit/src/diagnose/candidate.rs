@@ -6,6 +6,7 @@ use additive_riv::{
     augment, AdditiveModel, DynamicsFactor, FactorTarget, FitData, RivError, SubmodelKind,
 };
 use frf_data::ModelStructure;
+use rayon::prelude::*;
 use validation::residual::{Effect, ResidualAnalysis};
 
 /// Where a delay candidate's start comes from.
@@ -396,16 +397,20 @@ fn above_band(
     };
     let (lo, hi) = ABOVE_BAND;
     let nf = 12;
-    let mut best = (f64::INFINITY, f_hi, 0.03);
-    for a in 0..nf {
-        let f = f_hi * lo * (hi / lo).powf(a as f64 / (nf - 1) as f64);
-        for z in [0.01, 0.05, 0.2] {
-            let c = cost(f, z);
-            if c < best.0 {
-                best = (c, f, z);
-            }
-        }
-    }
+    // the grid's numerator fits are independent: both cores share them
+    let grid: Vec<(f64, f64)> = (0..nf)
+        .flat_map(|a| {
+            let f = f_hi * lo * (hi / lo).powf(a as f64 / (nf - 1) as f64);
+            [0.01, 0.05, 0.2].map(|z| (f, z))
+        })
+        .collect();
+    let best = grid
+        .into_par_iter()
+        .map(|(f, z)| (cost(f, z), f, z))
+        .reduce(
+            || (f64::INFINITY, f_hi, 0.03),
+            |a, b| if b.0 < a.0 { b } else { a },
+        );
     if !best.0.is_finite() {
         return None;
     }
