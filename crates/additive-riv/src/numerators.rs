@@ -203,7 +203,8 @@ fn solve_group(
         lmax = lmax.max(l[(i, i)]);
         lmin = lmin.min(l[(i, i)]);
     }
-    if !((lmax / lmin).powi(2) < 1e10) {
+    let cond = (lmax / lmin).powi(2);
+    if cond.is_nan() || cond >= 1e10 {
         return None;
     }
     let blocks: Vec<Vec<f64>> = grp
