@@ -6,8 +6,8 @@ use crate::problem::{groups, pack, unpack, Basis, EntryLines, FitData, Layout};
 use crate::small::spd_solve;
 use crate::{AdditiveModel, RivError};
 use faer::linalg::matmul::matmul;
-use faer::linalg::solvers::SolveLstsq;
-use faer::{Accum, Mat, Par};
+use faer::linalg::solvers::{Solve, SolveLstsq};
+use faer::{Accum, Mat, Par, Side};
 use rayon::prelude::*;
 
 /// Fits every numerator of `model` to `data` with the denominators held fixed
@@ -112,9 +112,36 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
         }
         Ok(sol)
     };
-    let sols: Vec<Vec<f64>> = (0..m)
+    // Entries whose line scales `s = sqrt(w) |F|` are proportional share the regressor
+    // up to a scalar, which leaves their solutions unchanged: one Gram matrix and one
+    // Cholesky factor per group, all right-hand sides by one GEMM (a large MIMO FRF with
+    // one noise level is a single group). Groups of one entry, and a group whose
+    // equilibrated Gram matrix is ill-conditioned, are solved entry by entry as above.
+    let mut s2 = vec![0.0; n * m];
+    for e in 0..m {
+        for k in 0..n {
+            s2[k * m + e] = (data.sqrt_w[e * n + k] * basis.f_abs[e * n + k]).powi(2);
+        }
+    }
+    let mut sols: Vec<Option<Vec<f64>>> = vec![None; m];
+    for grp in frf_data::proportional_groups(&s2, m, 1e-12) {
+        if grp.entries.len() < 2 {
+            continue;
+        }
+        if let Some(x) = solve_group(data, &basis, nn, &grp) {
+            for (c, &e) in grp.entries.iter().enumerate() {
+                sols[e] = Some(x[c * nn..(c + 1) * nn].to_vec());
+            }
+        }
+    }
+    drop(s2);
+    let sols: Vec<Vec<f64>> = sols
         .into_par_iter()
-        .map(solve_entry)
+        .enumerate()
+        .map(|(e, s)| match s {
+            Some(s) => Ok(s),
+            None => solve_entry(e),
+        })
         .collect::<Result<_, _>>()?;
     let (shared, mut eta) = pack(model, &lay);
     for (e, s) in sols.iter().enumerate() {
@@ -122,4 +149,108 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
     }
     unpack(model, &lay, &shared, &eta);
     Ok(crate::problem::cost(data, &lay, &basis, &eta, None, &ng))
+}
+
+/// Entries per block of right-hand sides in [`solve_group`].
+const GROUP_BLOCK: usize = 128;
+
+/// The numerators of the entries of `grp` (proportional line scales, see
+/// [`fit_numerators`]) by the normal equations of their shared regressor, column-major
+/// `nn x entries`: the Gram matrix equilibrated to unit diagonal and factored once (the
+/// per-entry path's `spd_solve`), the right-hand sides in blocks of entries, in
+/// parallel. `None` when the equilibrated Gram matrix is not positive definite or its
+/// condition exceeds 1e10 (the entries are then solved one by one).
+fn solve_group(
+    data: &FitData,
+    basis: &Basis,
+    nn: usize,
+    grp: &frf_data::WeightGroup,
+) -> Option<Vec<f64>> {
+    let n = data.n;
+    let ne = grp.entries.len();
+    let s0: Vec<f64> = grp.line_weights.iter().map(|w| w.sqrt()).collect();
+    let mut ut = Mat::<f64>::zeros(2 * n, nn);
+    for j in 0..nn {
+        let col = ut.col_as_slice_mut(j);
+        let (cr, ci) = col.split_at_mut(n);
+        for k in 0..n {
+            cr[k] = basis.u_re[j * n + k] * s0[k];
+            ci[k] = basis.u_im[j * n + k] * s0[k];
+        }
+    }
+    let mut z = Mat::<f64>::zeros(nn, nn);
+    matmul(
+        z.as_mut(),
+        Accum::Replace,
+        ut.transpose(),
+        ut.as_ref(),
+        1.0,
+        Par::Seq,
+    );
+    let mut d = vec![0.0; nn];
+    for (i, di) in d.iter_mut().enumerate() {
+        let zii = z[(i, i)];
+        if !(zii > 0.0 && zii.is_finite()) {
+            return None;
+        }
+        *di = 1.0 / zii.sqrt();
+    }
+    let zeq = Mat::from_fn(nn, nn, |i, j| z[(i, j)] * d[i] * d[j]);
+    let llt = zeq.llt(Side::Lower).ok()?;
+    let l = llt.L();
+    let (mut lmax, mut lmin) = (0.0f64, f64::INFINITY);
+    for i in 0..nn {
+        lmax = lmax.max(l[(i, i)]);
+        lmin = lmin.min(l[(i, i)]);
+    }
+    let cond = (lmax / lmin).powi(2);
+    if cond.is_nan() || cond >= 1e10 {
+        return None;
+    }
+    let blocks: Vec<Vec<f64>> = grp
+        .entries
+        .par_chunks(GROUP_BLOCK)
+        .map(|entries| {
+            // the divided data `G / F` of the block's entries, scaled like the regressor
+            let mut y = Mat::<f64>::zeros(2 * n, entries.len());
+            for (c, &e) in entries.iter().enumerate() {
+                let col = y.col_as_slice_mut(c);
+                let (yr, yi) = col.split_at_mut(n);
+                for k in 0..n {
+                    let (gr, gi, fi) = (
+                        data.g_re[e * n + k],
+                        data.g_im[e * n + k],
+                        basis.f_inv[e * n + k],
+                    );
+                    yr[k] = (gr * fi.re - gi * fi.im) * s0[k];
+                    yi[k] = (gr * fi.im + gi * fi.re) * s0[k];
+                }
+            }
+            let mut r = Mat::<f64>::zeros(nn, entries.len());
+            matmul(
+                r.as_mut(),
+                Accum::Replace,
+                ut.transpose(),
+                y.as_ref(),
+                1.0,
+                Par::Seq,
+            );
+            for c in 0..entries.len() {
+                for i in 0..nn {
+                    r[(i, c)] *= d[i];
+                }
+            }
+            let x = llt.solve(&r);
+            let mut out = vec![0.0; nn * entries.len()];
+            for c in 0..entries.len() {
+                for i in 0..nn {
+                    out[c * nn + i] = x[(i, c)] * d[i];
+                }
+            }
+            out
+        })
+        .collect();
+    let x: Vec<f64> = blocks.into_iter().flatten().collect();
+    debug_assert_eq!(x.len(), nn * ne);
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }

@@ -114,6 +114,21 @@ pub struct SubspaceConfig {
     pub noise_threshold: f64,
     /// Most integrators of the rigid-body part (`1/s`, `1/s^2`, ...). Default: 2.
     pub max_integrators: usize,
+    /// Above this many entries (`ny x nu`) the subspace step runs on the data with the
+    /// inputs projected onto `compress_directions` fixed orthonormal directions, and the
+    /// residues of every entry are refitted on the full data with its poles (see
+    /// [`crate::compress`]): the projection's cost and that of the residue refits of the
+    /// order choice fall by `nu / compress_directions`, those of (17) by
+    /// `ny / compress_directions`. Only with inverse-variance or uniform weighting (which
+    /// the compressed data keep exactly); `usize::MAX` never compresses. Default: 100
+    /// (the entries above which frfit's default chain is `subspace -> ml`).
+    pub compress_above: usize,
+    /// Directions of the compressed inputs (and of the outputs of (17)). Default: 8.
+    pub compress_directions: usize,
+    /// Solve (17) on the outputs projected onto this many fixed directions (set by the
+    /// compressed path; see [`crate::compress`]); `None` solves it on every output.
+    /// Default: `None`.
+    pub b_d_output_directions: Option<usize>,
     /// Analyses of the data the caller already made (the chain's: the delay estimate),
     /// used instead of computing them again. Default: none.
     pub precomputed: Precomputed,
@@ -146,6 +161,9 @@ impl Default for SubspaceConfig {
             max_integrators: 2,
             noise_threshold: 4.0,
             merge_tol: 1e-3,
+            compress_above: 100,
+            compress_directions: 8,
+            b_d_output_directions: None,
             precomputed: Precomputed::default(),
             progress: ProgressSink::none(),
         }
@@ -262,6 +280,13 @@ impl SubspaceInit {
         if c.order == Some(0) {
             return Err(SubspaceError::invalid("order", 0, "must be >= 1 state"));
         }
+        if c.compress_directions == 0 || c.b_d_output_directions == Some(0) {
+            return Err(SubspaceError::invalid(
+                "compress_directions",
+                0,
+                "must be >= 1 direction",
+            ));
+        }
         if !(c.merge_tol.is_finite() && (0.0..0.1).contains(&c.merge_tol)) {
             return Err(SubspaceError::invalid(
                 "merge_tol",
@@ -323,6 +348,12 @@ impl SubspaceInit {
     pub fn identify<D: FrfDataset + ?Sized>(&self, data: &D) -> Result<Identified, SubspaceError> {
         self.check()?;
         let cfg = &self.config;
+        let weighting = cfg.weighting.resolve(data);
+        if data.ny() * data.nu() > cfg.compress_above
+            && matches!(weighting, Weighting::InverseVariance | Weighting::Uniform)
+        {
+            return self.identify_compressed(data, weighting);
+        }
         let t0 = Instant::now();
         let mut timings = Vec::new();
         let mut messages = Vec::new();
@@ -388,6 +419,113 @@ impl SubspaceInit {
             timings,
         )?;
         self.refine_delay(data, first, delay_s, fitted, &messages, t0)
+    }
+
+    /// [`Self::identify`] on the data with the inputs projected onto
+    /// `compress_directions` directions (when there are more inputs) and (17) on as
+    /// many output directions (when there are more outputs), then the residues of every
+    /// entry by one least squares with the poles fixed (see [`crate::compress`]).
+    fn identify_compressed<D: FrfDataset + ?Sized>(
+        &self,
+        data: &D,
+        weighting: Weighting,
+    ) -> Result<Identified, SubspaceError> {
+        let cfg = &self.config;
+        let t0 = Instant::now();
+        let (ny, nu, k) = (data.ny(), data.nu(), cfg.compress_directions);
+        let inner = SubspaceInit::new(SubspaceConfig {
+            compress_above: usize::MAX,
+            weighting: weighting.clone(),
+            b_d_output_directions: (ny > k).then_some(k),
+            ..cfg.clone()
+        });
+        if nu <= k {
+            let mut id = inner.identify(data)?;
+            id.messages.push(format!(
+                "(17) solved on the outputs projected onto {k} of {ny} directions"
+            ));
+            return Ok(id);
+        }
+        let v = crate::compress::directions(nu, k, COMPRESS_SEED);
+        let compressed = crate::compress::compress_inputs(data, &v)?;
+        let t_compress = t0.elapsed().as_secs_f64();
+        let mut id = inner.identify(&compressed)?;
+        // the residues of every entry with the poles of the compressed fit
+        let t = Instant::now();
+        let m = &id.model.modal;
+        let ps = PoleSet {
+            pairs: m.pairs.iter().map(|p| p.pole).collect(),
+            reals: m.real_poles.iter().map(|p| p.pole).collect(),
+            at_origin: m.rigid.len(),
+            integrators: m.rigid.len(),
+            reflected: Vec::new(),
+            notes: Vec::new(),
+            pair_members: m.pairs.iter().map(|p| vec![p.pole]).collect(),
+        };
+        let w = weighting.weights(data)?;
+        let (model, cond) = fit_residues(
+            ny,
+            nu,
+            &data.omegas(),
+            &data.values_vec(),
+            &w,
+            &ps,
+            &id.model.factors,
+        )?;
+        let cost = weighted_cost(&model, data, &weighting)?;
+        id.messages.push(format!(
+            "poles from the data with the inputs projected onto {k} of {nu} fixed directions ((17) on {} of {ny} output directions); the residues of all {} entries refitted with them: cost {:.4e} (compressed data {:.4e})",
+            k.min(ny),
+            ny * nu,
+            cost,
+            id.report.cost
+        ));
+        id.report.cost = cost;
+        id.report.conditioning.residues = cond;
+        id.model = model;
+        // the state space of the compressed inputs, back through V^T (least norm)
+        let vt = v.transpose().to_owned();
+        let ss = &id.state_space;
+        id.state_space = StateSpace::new(
+            ss.a.clone(),
+            &ss.b * &vt,
+            ss.c.clone(),
+            &ss.d * &vt,
+            ss.domain,
+        )?;
+        let total = id.timings.iter().position(|(s, _)| s == "total");
+        if let Some(i) = total {
+            id.timings.remove(i);
+        }
+        id.timings
+            .insert(0, ("compress inputs".to_string(), t_compress));
+        id.timings.push((
+            "residues of all entries".to_string(),
+            t.elapsed().as_secs_f64(),
+        ));
+        id.timings
+            .push(("total".to_string(), t0.elapsed().as_secs_f64()));
+        Ok(id)
+    }
+
+    /// (17) on the prepared data, on `b_d_output_directions` output directions when
+    /// set (see [`crate::compress`]; `D` back through `U`).
+    fn b_d(
+        &self,
+        prepared: &crate::prepare::Prepared,
+        a: &faer::Mat<f64>,
+        c: &faer::Mat<f64>,
+    ) -> Result<(faer::Mat<f64>, faer::Mat<f64>, f64, f64), SubspaceError> {
+        match self.config.b_d_output_directions {
+            Some(k) if k < prepared.ny => {
+                let u = crate::compress::directions(prepared.ny, k, COMPRESS_SEED + 1);
+                let pu = crate::compress::project_outputs(prepared, &u);
+                let cu = u.transpose() * c;
+                let (b, du, cond, cost) = fit_b_d(&pu, a, &cu)?;
+                Ok((b, &u * &du, cond, cost))
+            }
+            _ => fit_b_d(prepared, a, c),
+        }
     }
 
     /// The delay refinement of a free delay (`Auto`, `Start`; see
@@ -674,7 +812,7 @@ impl SubspaceInit {
                     let (chosen, scores) = f_sweep(&settings, |n| {
                         let o = proj.observability(n);
                         let (a, c, _) = shift_a_c(&o, ny).ok()?;
-                        let (b, _, _, _) = fit_b_d(&prepared, &a, &c).ok()?;
+                        let (b, _, _, _) = self.b_d(&prepared, &a, &c).ok()?;
                         let (eig, w) = eigen_weights(&a, &b, &c).ok()?;
                         let ps = classify(
                             &eig,
@@ -747,7 +885,7 @@ impl SubspaceInit {
         let (a, c, cond_shift) = shift_a_c(&o, ny)?;
         timings.push(("A, C (12)".to_string(), t.elapsed().as_secs_f64()));
         let t = Instant::now();
-        let (b, d, cond_bd, ss_cost) = fit_b_d(&prepared, &a, &c)?;
+        let (b, d, cond_bd, ss_cost) = self.b_d(&prepared, &a, &c)?;
         let (eig, eig_weight) = eigen_weights(&a, &b, &c)?;
         let state_space = match prepared.variable {
             Variable::Shift { ts } => {
@@ -988,6 +1126,9 @@ impl SubspaceInit {
 /// Huber threshold in amplitude.
 const ROBUST_LINE_C: f64 = 9.0;
 
+/// Seed of the fixed directions of the compressed data (see [`crate::compress`]).
+const COMPRESS_SEED: u64 = 0x5EED_0001;
+
 /// Most passes on the flexible part after the first (see `SubspaceInit::identify`).
 const FLEXIBLE_PASSES: usize = 8;
 
@@ -1160,7 +1301,7 @@ impl SubspaceInit {
         let Ok((a, c, _)) = shift_a_c(&o, ny) else {
             return Ok(None);
         };
-        let (b, _, _, _) = fit_b_d(&flex, &a, &c)?;
+        let (b, _, _, _) = self.b_d(&flex, &a, &c)?;
         let (eig, w) = eigen_weights(&a, &b, &c)?;
         let mut poles = classify(
             &eig,

@@ -29,7 +29,13 @@
 //!    subspace poles fixed (the residue refit is linear, its cost a function of the
 //!    delay alone), the subspace step repeated with the refined delay divided out;
 //! 7. [`SubspaceInit`]: all of it behind `frf_data::Estimator` (`Start = ()`).
+//!
+//! Above `SubspaceConfig::compress_above` entries, steps 2-6 run on the data with the
+//! inputs projected onto a few fixed directions ([`compress`]: the poles are common to
+//! every entry), and the residues of every entry are refitted on the full data with the
+//! poles fixed.
 
+pub mod compress;
 pub mod currency;
 pub mod delay_refine;
 pub mod error;

@@ -30,9 +30,13 @@
 use crate::prepare::Prepared;
 use crate::SubspaceError;
 use faer::Mat;
+use rayon::prelude::*;
 
 /// Lines per block of the running QR.
 pub const LINES_PER_BLOCK: usize = 192;
+
+/// The inputs are projected in this many chunks in parallel.
+const INPUT_CHUNKS: usize = 2;
 
 /// The weighted, projected data: what the order choice and the realization need.
 #[derive(Debug, Clone)]
@@ -143,32 +147,48 @@ pub fn project(d: &Prepared, r: usize) -> Result<Projected, SubspaceError> {
             x *= d.xi[k];
         }
     }
-    let mut acc = Mat::<f64>::zeros(rp, rp);
-    let mut block = Mat::<f64>::zeros(2 * LINES_PER_BLOCK, nc);
-    for j in 0..nu {
-        let mut rj = Mat::<f64>::zeros(nc, nc);
-        let mut k0 = 0;
-        while k0 < n {
-            let k1 = (k0 + LINES_PER_BLOCK).min(n);
-            for k in k0..k1 {
-                let c = cw[k * nu + j];
-                let (re, im) = (2 * (k - k0), 2 * (k - k0) + 1);
-                for i in 0..r {
-                    let x = pw[k * r + i] * c;
-                    block[(re, i)] = x.re;
-                    block[(im, i)] = x.im;
-                    for o in 0..p {
-                        let y = x * d.h[k * p * nu + j * p + o];
-                        block[(re, r + i * p + o)] = y.re;
-                        block[(im, r + i * p + o)] = y.im;
+    // lines per block of the running QR: at least as many rows as the triangle it
+    // carries, so that refactoring the triangle costs at most half of the new rows
+    let lpb = LINES_PER_BLOCK.max(nc.div_ceil(2) * 2);
+    // the inputs in a fixed number of interleaved chunks, in parallel (a fixed count,
+    // not the thread count, so that the result does not depend on the machine)
+    let chunks = INPUT_CHUNKS.min(nu).max(1);
+    let parts: Vec<Result<Mat<f64>, SubspaceError>> = (0..chunks)
+        .into_par_iter()
+        .map(|chunk| {
+            let mut acc = Mat::<f64>::zeros(rp, rp);
+            let mut block = Mat::<f64>::zeros(2 * lpb, nc);
+            for j in (chunk..nu).step_by(chunks) {
+                let mut rj = Mat::<f64>::zeros(nc, nc);
+                let mut k0 = 0;
+                while k0 < n {
+                    let k1 = (k0 + lpb).min(n);
+                    for k in k0..k1 {
+                        let c = cw[k * nu + j];
+                        let (re, im) = (2 * (k - k0), 2 * (k - k0) + 1);
+                        for i in 0..r {
+                            let x = pw[k * r + i] * c;
+                            block[(re, i)] = x.re;
+                            block[(im, i)] = x.im;
+                            for o in 0..p {
+                                let y = x * d.h[k * p * nu + j * p + o];
+                                block[(re, r + i * p + o)] = y.re;
+                                block[(im, r + i * p + o)] = y.im;
+                            }
+                        }
                     }
+                    rj = absorb(&rj, &block, 2 * (k1 - k0))?;
+                    k0 = k1;
                 }
+                let r22 = Mat::from_fn(rp, rp, |a, b| rj[(r + a, r + b)]);
+                acc = absorb(&acc, &r22, rp)?;
             }
-            rj = absorb(&rj, &block, 2 * (k1 - k0))?;
-            k0 = k1;
-        }
-        let r22 = Mat::from_fn(rp, rp, |a, b| rj[(r + a, r + b)]);
-        acc = absorb(&acc, &r22, rp)?;
+            Ok(acc)
+        })
+        .collect();
+    let mut acc = Mat::<f64>::zeros(rp, rp);
+    for part in parts {
+        acc = absorb(&acc, &part?, rp)?;
     }
     let l = if d.uniform {
         None

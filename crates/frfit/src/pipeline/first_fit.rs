@@ -198,6 +198,7 @@ pub fn chain_fit(
         frf_data::FrfDataset::ny(&ctx.band) * frf_data::FrfDataset::nu(&ctx.band),
     );
     let result = run_chain(&ctx.band, &init, &refine, &settings, &opts)?;
+    let t_numerators = std::time::Instant::now();
     let model = match result.model.native::<AdditiveModel>() {
         Some(m) => m.clone(),
         None => {
@@ -208,6 +209,7 @@ pub fn chain_fit(
             m
         }
     };
+    let numerators_s = t_numerators.elapsed().as_secs_f64();
     let refined_by_riv = result.chain.last().is_some_and(|l| l == "riv");
     let mut report = FitterReport::default();
     for l in &result.links {
@@ -247,6 +249,16 @@ pub fn chain_fit(
             .links
             .iter()
             .flat_map(|l| l.timings.clone())
+            .chain(
+                result
+                    .model
+                    .native::<AdditiveModel>()
+                    .is_none()
+                    .then(|| frf_data::Timing {
+                        stage: "additive model: numerators".into(),
+                        seconds: numerators_s,
+                    }),
+            )
             .collect(),
         estimator: result
             .links
