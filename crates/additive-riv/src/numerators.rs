@@ -120,7 +120,7 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
     let mut s2 = vec![0.0; n * m];
     for e in 0..m {
         for k in 0..n {
-            s2[k * m + e] = (data.sqrt_w[e * n + k] * basis.f_abs[e * n + k]).powi(2);
+            s2[k * m + e] = (data.sqrt_w[e * n + k] * basis.f_abs[basis.f_offset(e) + k]).powi(2);
         }
     }
     let mut sols: Vec<Option<Vec<f64>>> = vec![None; m];
@@ -220,7 +220,7 @@ fn solve_group(
                     let (gr, gi, fi) = (
                         data.g_re[e * n + k],
                         data.g_im[e * n + k],
-                        basis.f_inv[e * n + k],
+                        basis.f_inv[basis.f_offset(e) + k],
                     );
                     yr[k] = (gr * fi.re - gi * fi.im) * s0[k];
                     yi[k] = (gr * fi.im + gi * fi.re) * s0[k];
