@@ -58,36 +58,47 @@ pub const SECOND_START: &str = "sk";
 /// above which `frfit fit` runs the second start even after a converged refinement.
 pub const SECOND_START_RESIDUAL: f64 = 3.0;
 
-/// A default chain whose refinement did not converge (its iterations failed or ran out)
-/// started too far from an optimum, and so did one that `frfit fit` (no diagnosis)
-/// leaves with a residual more than [`SECOND_START_RESIDUAL`] times the noise: the same
-/// refiner from the [`SECOND_START`]
-/// initialiser is run, and the fit with the smaller final prediction error (the weighted
-/// cost corrected for the parameters spent, as between the chains of `--init A,B`) is
-/// the first fit. A better second start is a better first fit, not an effect: the
-/// fit's messages and `chain_runs` say which chains ran and which was kept. Nothing
-/// changes when `--init` was given (an explicit choice is kept), when the first chain's
-/// initialiser is the second start's own, or when the first fit converged.
+/// For `frfit fit`: a default chain whose refinement did not converge (its iterations
+/// failed or ran out) started too far from an optimum, and so did one that leaves a
+/// residual more than [`SECOND_START_RESIDUAL`] times the noise (`fit` has no loop to
+/// trace it). The same refiner then runs from the [`SECOND_START`] initialiser, and the
+/// fit with the smaller final prediction error (the weighted cost corrected for the
+/// parameters spent, as between the chains of `--init A,B`) is the first fit. A better
+/// second start is a better first fit, not an effect: the fit's messages and
+/// `chain_runs` say which chains ran and which was kept. Nothing changes for the
+/// diagnosis (its loop and delay restart test the catalogue's effects first; a common
+/// denominator from the start would absorb an undeclared delay in spurious poles), when
+/// `--init` was given (an explicit choice is kept), when the default chain does not start
+/// from the CMIF peaks (above 100 entries it starts from the subspace step, which needs
+/// no peaks either, and SK's common denominator of order ~2x the modes is then
+/// ill-determined and slow), or when the first fit converged near the noise level.
 fn second_start(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     first: FirstFit,
 ) -> Result<FirstFit, FrfitError> {
+    // The diagnosis does not take the second start: its loop and its delay restart test
+    // the effects first, and a common denominator from the start absorbs an undeclared
+    // delay in spurious poles.
+    if cfg.diagnose
+        || !cfg.init.trim().is_empty()
+        || first.chain.first().is_none_or(|i| i != "cmif")
+    {
+        return Ok(first);
+    }
     let converged = !matches!(
         first.fit.convergence,
         frf_data::Convergence::Failed { .. } | frf_data::Convergence::MaxIterations { .. }
     );
     // `fit` has no loop to trace a residual far above the noise: a start that left it
-    // there is poor too (the diagnosis's loop tests effects for it instead)
-    let far_from_noise = !cfg.diagnose && {
-        let response = first.fit.model.response_at(&ctx.omega);
-        super::error_stats(&ctx.band, &response, &ctx.noise).residual_to_noise
-            > SECOND_START_RESIDUAL
-    };
-    if (converged && !far_from_noise)
-        || !cfg.init.trim().is_empty()
-        || first.chain.first().is_none_or(|i| i == SECOND_START)
-    {
+    // there is poor too
+    let residual_to_noise = super::error_stats(
+        &ctx.band,
+        &first.fit.model.response_at(&ctx.omega),
+        &ctx.noise,
+    )
+    .residual_to_noise;
+    if converged && residual_to_noise <= SECOND_START_RESIDUAL {
         return Ok(first);
     }
     let second_cfg = PipelineConfig {
@@ -115,15 +126,7 @@ fn second_start(
         kept,
     };
     let why = if converged {
-        format!(
-            "left a residual {:.1} times the noise level",
-            super::error_stats(
-                &ctx.band,
-                &first.fit.model.response_at(&ctx.omega),
-                &ctx.noise
-            )
-            .residual_to_noise
-        )
+        format!("left a residual {residual_to_noise:.1} times the noise level")
     } else {
         format!("did not converge ({})", first.fit.convergence.describe())
     };
