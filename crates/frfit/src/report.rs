@@ -1396,13 +1396,17 @@ fn markdown(
     } else {
         let _ = writeln!(md, "| stage | time |");
         let _ = writeln!(md, "|---|---:|");
+        // the run's own `total` stage (from the start of the setup to the summary) is
+        // the total; summing it with the stages it holds would count them twice
+        let run_total = s.timings.iter().find(|t| t.stage == "total");
         let mut total = 0.0;
-        for t in &s.timings {
+        for t in s.timings.iter().filter(|t| t.stage != "total") {
             if t.seconds.is_finite() {
                 total += t.seconds;
             }
             let _ = writeln!(md, "| {} | {} |", cell(&t.stage), fmt_seconds(t.seconds));
         }
+        let total = run_total.map_or(total, |t| t.seconds);
         let _ = writeln!(md, "| **total** | **{}** |\n", fmt_seconds(total));
     }
     let _ = writeln!(

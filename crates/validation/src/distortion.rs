@@ -54,6 +54,7 @@ use crate::noise::{difference_coefficients, NoiseLevel, NoiseSource};
 use crate::stats::{median_mut, normal_quantile};
 use crate::ValidationError;
 use frf_data::{FrfDataset, C64};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Settings of [`line_floor`], with documented defaults.
@@ -180,25 +181,40 @@ pub fn floor_noise(
     let (n, m) = (data.n_lines(), data.n_entries());
     let p = cfg.order;
     let ns = n - p;
+    // the ratio of every entry at every line, `[e * n + k]`: the entries are independent
+    // (a median per line over the window), so they run in parallel
+    let mut ratios = vec![1.0; n * m];
+    ratios
+        .par_chunks_mut(n)
+        .zip(r.par_chunks(ns))
+        .for_each(|(out, re)| {
+            let mut win = SortedWindow::with_capacity(2 * half_window + 1);
+            let (mut lo, mut hi) = (0, 0);
+            for (k, ratio) in out.iter_mut().enumerate() {
+                // stencils whose centre (start + p / 2) lies within +-half_window of line k
+                let c = k as isize - (p / 2) as isize;
+                let hi_k = ((c + half_window as isize).max(-1) + 1)
+                    .min(ns as isize)
+                    .max(0) as usize;
+                let lo_k = ((c - half_window as isize).max(0) as usize).min(hi_k);
+                // both ends only move forward with k
+                for &x in &re[hi..hi_k.max(hi)] {
+                    win.insert(x);
+                }
+                hi = hi.max(hi_k);
+                for &x in &re[lo..lo_k.max(lo)] {
+                    win.remove(x);
+                }
+                lo = lo.max(lo_k);
+                if let Some(med) = win.median() {
+                    *ratio = (med / std::f64::consts::LN_2).max(1.0);
+                }
+            }
+        });
     let mut variance = declared.variance.clone();
-    let mut win = Vec::with_capacity(2 * half_window + 1);
-    for e in 0..m {
-        let re = &r[e * ns..(e + 1) * ns];
-        for k in 0..n {
-            // stencils whose centre (start + p / 2) lies within +-half_window of line k
-            let c = k as isize - (p / 2) as isize;
-            let lo = (c - half_window as isize).max(0) as usize;
-            let hi = ((c + half_window as isize).max(-1) + 1)
-                .min(ns as isize)
-                .max(0) as usize;
-            win.clear();
-            win.extend(re[lo.min(hi)..hi].iter().copied().filter(|x| !x.is_nan()));
-            let ratio = if win.is_empty() {
-                1.0
-            } else {
-                (median_mut(&mut win) / std::f64::consts::LN_2).max(1.0)
-            };
-            variance[k * m + e] *= ratio;
+    for (k, v) in variance.chunks_mut(m).enumerate() {
+        for (e, v) in v.iter_mut().enumerate() {
+            *v *= ratios[e * n + k];
         }
     }
     Ok(NoiseLevel {
@@ -211,6 +227,44 @@ pub fn floor_noise(
         ny: declared.ny,
         nu: declared.nu,
     })
+}
+
+/// The values of a sliding window in order (NaN left out), for its running median: one
+/// insertion and one removal per step instead of a selection over the whole window.
+struct SortedWindow(Vec<f64>);
+
+impl SortedWindow {
+    fn with_capacity(n: usize) -> Self {
+        Self(Vec::with_capacity(n))
+    }
+
+    /// Adds `x` (NaN is not kept).
+    fn insert(&mut self, x: f64) {
+        if !x.is_nan() {
+            let i = self.0.partition_point(|y| y.total_cmp(&x).is_lt());
+            self.0.insert(i, x);
+        }
+    }
+
+    /// Removes one value equal to `x` (added before by [`insert`](Self::insert)).
+    fn remove(&mut self, x: f64) {
+        if !x.is_nan() {
+            let i = self.0.partition_point(|y| y.total_cmp(&x).is_lt());
+            if self.0.get(i).is_some_and(|y| y.total_cmp(&x).is_eq()) {
+                self.0.remove(i);
+            }
+        }
+    }
+
+    /// The median, as [`median_mut`] of the window's values; `None` when empty.
+    fn median(&self) -> Option<f64> {
+        let (v, n) = (&self.0, self.0.len());
+        match n {
+            0 => None,
+            _ if n % 2 == 1 => Some(v[n / 2]),
+            _ => Some(0.5 * (v[n / 2 - 1] + v[n / 2])),
+        }
+    }
 }
 
 /// The per-stencil ratios `r` of the module documentation, `[e * (n - p) + start]` for
@@ -366,6 +420,37 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use rand_distr::StandardNormal;
+
+    proptest! {
+        /// The running median of the sliding window is the median of the window's
+        /// values (NaN left out) at every step, for windows whose ends move forward by
+        /// any amount, with repeated values and NaN.
+        #[test]
+        fn sorted_window_median_is_the_window_median(
+            values in proptest::collection::vec(
+                prop_oneof![Just(f64::NAN), Just(1.0), 0.0..5.0f64], 1..60),
+            width in 1usize..12,
+        ) {
+            let mut win = SortedWindow::with_capacity(width);
+            let (mut lo, mut hi) = (0, 0);
+            for k in 0..values.len() + width {
+                let hi_k = (k + 1).min(values.len());
+                let lo_k = k.saturating_sub(width).min(hi_k);
+                for &x in &values[hi..hi_k.max(hi)] {
+                    win.insert(x);
+                }
+                hi = hi.max(hi_k);
+                for &x in &values[lo..lo_k.max(lo)] {
+                    win.remove(x);
+                }
+                lo = lo.max(lo_k);
+                let mut direct: Vec<f64> =
+                    values[lo..hi].iter().copied().filter(|x| !x.is_nan()).collect();
+                let expected = (!direct.is_empty()).then(|| median_mut(&mut direct));
+                prop_assert_eq!(win.median().map(f64::to_bits), expected.map(f64::to_bits));
+            }
+        }
+    }
 
     /// A 2 x 2 response with two lightly damped modes (zeta 0.01 at 120 and 310 Hz) on
     /// `n` lines of 0.5 Hz from 20 Hz, plus circular Gaussian noise of relative standard

@@ -34,6 +34,7 @@ use crate::stats::chi2_sf;
 use crate::ValidationError;
 use frf_data::cmif::{cmif, pick_peaks};
 use frf_data::{Frf, C64};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -850,7 +851,10 @@ pub fn io_factors(
     conc: &crate::residual::Concentration,
 ) -> (Vec<IoFactor>, Vec<IoFactor>) {
     let (ny, nu) = (res.ny, res.nu);
+    // every column and row is fitted on its own (a grid over the second-order factor's
+    // frequency): in parallel, in order
     let cols = (0..nu)
+        .into_par_iter()
         .map(|j| {
             let fits = factor_on(res, |e| e / ny == j, nu);
             io_factor(
@@ -864,6 +868,7 @@ pub fn io_factors(
         })
         .collect();
     let rows = (0..ny)
+        .into_par_iter()
         .map(|i| {
             let fits = factor_on(res, |e| e % ny == i, ny);
             io_factor(

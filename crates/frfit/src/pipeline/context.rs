@@ -60,7 +60,9 @@ pub struct FitContext {
     /// The band with its weights in the estimator's layout.
     pub fit_data: FitData,
     /// The data's own delay (phase slope of the FRF, default settings of
-    /// [`estimate_delay`]); `None` when the estimator fails on these data.
+    /// [`estimate_delay`]); `None` when the estimator fails on these data, or when
+    /// nothing reads it: a fit (no diagnosis) whose delay is given rather than
+    /// [`DelayChoice::Auto`].
     pub delay_estimate: Option<DelayEstimate>,
     /// Angular frequencies of the band's lines, rad/s.
     pub omega: Vec<f64>,
@@ -172,9 +174,17 @@ impl FitContext {
             (true, Some(r)) if r >= 3 => Some(2.0 * (r as f64 - 1.0)),
             _ => None,
         };
-        let t = Instant::now();
-        let delay_estimate = estimate_delay(&band, &Default::default()).ok();
-        timings.stage("delay estimate", t);
+        // the data's delay is read by the chain when it estimates the delay and by the
+        // diagnosis (its delay restart and the second starts); a given delay (`--delay
+        // none` or seconds) in a plain fit needs none (seconds at 50 x 50 entries)
+        let delay_estimate = if cfg.diagnose || delay == DelayChoice::Auto {
+            let t = Instant::now();
+            let est = estimate_delay(&band, &Default::default()).ok();
+            timings.stage("delay estimate", t);
+            est
+        } else {
+            None
+        };
         Ok(Self {
             band,
             declared: decl,
