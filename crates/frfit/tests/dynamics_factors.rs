@@ -79,22 +79,7 @@ fn a_sensor_mount_resonance_is_a_second_order_factor_on_its_row() {
         1.0,
     );
     let out = diagnose(&data, "sensor-mount resonance");
-    let steps = accepted(&out, "output_dynamics");
-    assert_eq!(steps.len(), 1, "one output_dynamics step");
-    let p = &steps[0].params;
-    assert_eq!(p["support"], "outputs");
-    assert_eq!(p["order"], 2);
-    assert_eq!(p["outputs"][0], 2, "the resonance is on output 2");
-    let pole = &p["poles"][0];
-    let (f, z) = (
-        pole["f_hz"].as_f64().unwrap(),
-        pole["zeta"].as_f64().unwrap(),
-    );
-    assert!(
-        (f / f_r - 1.0).abs() < 0.01,
-        "resonance at {f:.1} Hz, made at {f_r}"
-    );
-    assert!((z / zeta - 1.0).abs() < 0.1, "damping {z:.4}, made {zeta}");
+    common::assert_output_resonance(&out, 2, f_r, zeta);
     for e in ["delay", "feedthrough", "input_dynamics", "missed_mode"] {
         assert!(accepted(&out, e).is_empty(), "no {e} step");
     }

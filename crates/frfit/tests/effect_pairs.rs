@@ -56,27 +56,6 @@ fn assert_near_truth(out: &PipelineOutput, clean: &Frf) {
     assert!(med <= 1e-4, "median {med:.3e} vs the noiseless response");
 }
 
-/// A second-order `output_dynamics` step on output `row` (1-based) at `f_r` (within
-/// 1 %) and `zeta` (within 10 %).
-fn assert_output_resonance(out: &PipelineOutput, row: usize, f_r: f64, zeta: f64) {
-    let steps = accepted(out, "output_dynamics");
-    assert_eq!(steps.len(), 1, "one output_dynamics step");
-    let p = &steps[0].params;
-    assert_eq!(p["support"], "outputs");
-    assert_eq!(p["order"], 2);
-    assert_eq!(p["outputs"][0], row, "the resonance is on output {row}");
-    let pole = &p["poles"][0];
-    let (f, z) = (
-        pole["f_hz"].as_f64().unwrap(),
-        pole["zeta"].as_f64().unwrap(),
-    );
-    assert!(
-        (f / f_r - 1.0).abs() < 0.01,
-        "resonance at {f:.1} Hz, made at {f_r}"
-    );
-    assert!((z / zeta - 1.0).abs() < 0.1, "damping {z:.4}, made {zeta}");
-}
-
 /// A suspension at 4 Hz (damping 0.05; the plate's rigid body on springs) and an 18th
 /// mode at 700 Hz that the nominal mode count (17) leaves out: the loop names the
 /// stiffness, and the missed mode is held by the final model (added by the loop or
@@ -149,7 +128,7 @@ fn feedthrough_with_resonance(seed: u64, f_r: f64) {
         1,
         "one feedthrough step"
     );
-    assert_output_resonance(&out, 2, f_r, zeta);
+    common::assert_output_resonance(&out, 2, f_r, zeta);
     for e in ["delay", "input_dynamics", "missed_mode"] {
         assert!(accepted(&out, e).is_empty(), "no {e} step");
     }
@@ -189,7 +168,7 @@ fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64) {
         ..sim()
     });
     let out = diagnose(&data, "sensor resonance near a mode", ModeSelection::Auto);
-    assert_output_resonance(&out, 3, f_r, zeta);
+    common::assert_output_resonance(&out, 3, f_r, zeta);
     for e in ["delay", "feedthrough", "input_dynamics", "missed_mode"] {
         assert!(accepted(&out, e).is_empty(), "no {e} step");
     }

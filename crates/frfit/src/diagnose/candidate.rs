@@ -358,6 +358,22 @@ fn local_modes(
     out
 }
 
+/// The dynamics factor `start` on input `k` (`input`) or output `k` alone (0-based).
+fn one_factor(input: bool, k: usize, start: FactorStart) -> Candidate {
+    let which = vec![k + 1];
+    if input {
+        Candidate::InputDynamics {
+            inputs: which,
+            start,
+        }
+    } else {
+        Candidate::OutputDynamics {
+            outputs: which,
+            start,
+        }
+    }
+}
+
 /// A second-order factor above the band on the residual's dominant output row (`rows`)
 /// or input column: a sensor's or actuator's mount resonance beyond the top line shows
 /// in the band only as that row's magnitude rise `1 / (1 - (f / f_r)^2)` with little
@@ -739,18 +755,7 @@ fn propose_dynamics(
         (Effect::OutputDynamics, false),
     ] {
         for (k, start) in local_modes(model, an, fd, !input) {
-            let which = vec![k + 1];
-            let candidate = if input {
-                Candidate::InputDynamics {
-                    inputs: which,
-                    start: start.clone(),
-                }
-            } else {
-                Candidate::OutputDynamics {
-                    outputs: which,
-                    start: start.clone(),
-                }
-            };
+            let candidate = one_factor(input, k, start.clone());
             if seen(effect, &candidate.key()) {
                 continue;
             }
@@ -786,18 +791,7 @@ fn propose_dynamics(
         let Some((k, start)) = above_band(model, an, fd, !input) else {
             continue;
         };
-        let which = vec![k + 1];
-        let candidate = if input {
-            Candidate::InputDynamics {
-                inputs: which,
-                start: start.clone(),
-            }
-        } else {
-            Candidate::OutputDynamics {
-                outputs: which,
-                start: start.clone(),
-            }
-        };
+        let candidate = one_factor(input, k, start.clone());
         if seen(effect, &candidate.key()) || pushed.contains(&(effect, candidate.key())) {
             continue;
         }

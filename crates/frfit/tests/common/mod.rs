@@ -306,3 +306,34 @@ pub fn print_steps(name: &str, out: &frfit::pipeline::PipelineOutput) {
         s.verdict, s.verdict_evidence, s.final_errors, s.data_noise_median_rel
     );
 }
+
+/// The one accepted second-order `output_dynamics` step of `out`: on output `row`
+/// (1-based), at `f_r` (within 1 %) with damping `zeta` (within 10 %).
+pub fn assert_output_resonance(
+    out: &frfit::pipeline::PipelineOutput,
+    row: usize,
+    f_r: f64,
+    zeta: f64,
+) {
+    let steps: Vec<_> = out
+        .summary
+        .steps
+        .iter()
+        .filter(|s| s.accepted && s.effect == "output_dynamics")
+        .collect();
+    assert_eq!(steps.len(), 1, "one output_dynamics step");
+    let p = &steps[0].params;
+    assert_eq!(p["support"], "outputs");
+    assert_eq!(p["order"], 2);
+    assert_eq!(p["outputs"][0], row, "the resonance is on output {row}");
+    let pole = &p["poles"][0];
+    let (f, z) = (
+        pole["f_hz"].as_f64().unwrap(),
+        pole["zeta"].as_f64().unwrap(),
+    );
+    assert!(
+        (f / f_r - 1.0).abs() < 0.01,
+        "resonance at {f:.1} Hz, made at {f_r}"
+    );
+    assert!((z / zeta - 1.0).abs() < 0.1, "damping {z:.4}, made {zeta}");
+}
