@@ -25,14 +25,6 @@ fn diagnose(test: &str, name: &str, modes: ModeSelection) -> Option<PipelineOutp
     Some(out)
 }
 
-fn accepted<'a>(out: &'a PipelineOutput, effect: &str) -> Vec<&'a frfit::summary::StepSummary> {
-    out.summary
-        .steps
-        .iter()
-        .filter(|s| s.accepted && s.effect == effect)
-        .collect()
-}
-
 /// After the loop the median relative error against the data is within 1.5x the data's
 /// own median noise level.
 fn assert_at_noise_level(out: &PipelineOutput) {
@@ -79,7 +71,7 @@ fn extra_delay_is_found() {
     let Some(out) = diagnose(test, "wafer_extra_delay.csv", ModeSelection::Auto) else {
         return;
     };
-    let delays = accepted(&out, "delay");
+    let delays = common::accepted(&out, "delay");
     assert_eq!(delays.len(), 1, "one delay step");
     let seconds = delays[0].params["seconds"].as_f64().unwrap();
     assert!(
@@ -99,7 +91,7 @@ fn hidden_mode_is_held_by_the_final_model() {
     };
     let f_hidden = 520.4861640205804;
     let near = |f: f64| (f / f_hidden - 1.0).abs() <= 0.005;
-    let in_loop = accepted(&out, "missed_mode")
+    let in_loop = common::accepted(&out, "missed_mode")
         .iter()
         .any(|s| near(s.params["f_hz"].as_f64().unwrap()));
     let in_initial = out.summary.initial.modes.iter().any(|m| near(m.f_hz));
@@ -109,9 +101,9 @@ fn hidden_mode_is_held_by_the_final_model() {
     // the file's delay is right: a restart that lands in a better optimum is a better
     // first fit, not a delay step
     assert!(
-        accepted(&out, "delay").is_empty(),
+        common::accepted(&out, "delay").is_empty(),
         "no delay step: {:?}",
-        accepted(&out, "delay")
+        common::accepted(&out, "delay")
     );
     assert_at_noise_level(&out);
 }
@@ -123,7 +115,7 @@ fn crosstalk_feedthrough_is_found() {
         return;
     };
     assert!(
-        !accepted(&out, "feedthrough").is_empty(),
+        !common::accepted(&out, "feedthrough").is_empty(),
         "a feedthrough step"
     );
     assert!(out.summary.final_model.feedthrough);
@@ -200,7 +192,7 @@ fn actuator_and_sensor_lags_are_found() {
         ),
     ] {
         let out = diagnose_frf(&with_lag(&data, column, row, fc), name, cfg());
-        let steps = accepted(&out, effect);
+        let steps = common::accepted(&out, effect);
         assert_eq!(steps.len(), 1, "{name}: one {effect} step");
         let which = steps[0].params[key][0].as_u64().unwrap() as usize;
         assert_eq!(
@@ -242,11 +234,11 @@ fn undeclared_delay_and_hold_are_found() {
         .declared
         .iter()
         .all(|d| !d.contains("delay")));
-    let delay = accepted(&out, "delay");
+    let delay = common::accepted(&out, "delay");
     assert_eq!(delay.len(), 1);
     let total = delay[0].params["total_delay_s"].as_f64().unwrap();
     assert!((total - 150e-6).abs() < 5e-6, "delay {:.2} us", total * 1e6);
-    assert_eq!(accepted(&out, "hold").len(), 1, "the hold is found");
+    assert_eq!(common::accepted(&out, "hold").len(), 1, "the hold is found");
     assert_eq!(out.summary.final_model.hold, "zoh:10000");
     assert_eq!(out.summary.verdict, "noise_limited");
     assert_at_noise_level(&out);

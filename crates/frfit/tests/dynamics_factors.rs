@@ -7,29 +7,8 @@
 
 mod common;
 
-use frf_data::Frf;
-use frfit::pipeline::{run, PipelineConfig, PipelineOutput};
-use frfit::summary::StepSummary;
+use additive_riv::ModeSelection;
 use realize::{DynamicsFactor, FactorTarget};
-
-/// Runs the diagnosis on `data` and prints its steps.
-fn diagnose(data: &Frf, name: &str) -> PipelineOutput {
-    let cfg = PipelineConfig {
-        diagnose: true,
-        ..Default::default()
-    };
-    let out = run(data, name, &cfg, "diagnose").unwrap();
-    common::print_steps(name, &out);
-    out
-}
-
-fn accepted<'a>(out: &'a PipelineOutput, effect: &str) -> Vec<&'a StepSummary> {
-    out.summary
-        .steps
-        .iter()
-        .filter(|s| s.accepted && s.effect == effect)
-        .collect()
-}
 
 #[test]
 fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
@@ -42,8 +21,8 @@ fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
         vec![DynamicsFactor::first_order(FactorTarget::All, f_c)],
         1.0,
     );
-    let out = diagnose(&data, "common lag");
-    let steps = accepted(&out, "input_dynamics");
+    let out = common::diagnose(&data, "common lag", ModeSelection::Auto);
+    let steps = common::accepted(&out, "input_dynamics");
     assert_eq!(steps.len(), 1, "one input_dynamics step");
     let p = &steps[0].params;
     assert_eq!(p["support"], "all");
@@ -55,7 +34,7 @@ fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
         "lag at {pole:.1} Hz, made at {f_c}"
     );
     for e in ["delay", "feedthrough", "output_dynamics", "missed_mode"] {
-        assert!(accepted(&out, e).is_empty(), "no {e} step");
+        assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
     assert_eq!(out.summary.verdict, "noise_limited");
     let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::MAX);
@@ -78,10 +57,10 @@ fn a_sensor_mount_resonance_is_a_second_order_factor_on_its_row() {
         )],
         1.0,
     );
-    let out = diagnose(&data, "sensor-mount resonance");
+    let out = common::diagnose(&data, "sensor-mount resonance", ModeSelection::Auto);
     common::assert_output_resonance(&out, 2, f_r, zeta);
     for e in ["delay", "feedthrough", "input_dynamics", "missed_mode"] {
-        assert!(accepted(&out, e).is_empty(), "no {e} step");
+        assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
     assert_eq!(out.summary.verdict, "noise_limited");
     assert_eq!(
@@ -109,8 +88,8 @@ fn a_common_lag_with_an_undeclared_delay_are_both_found() {
         extra_delay_samples: 0.6,
         ..common::Sim::default()
     });
-    let out = diagnose(&data, "common lag + delay");
-    let lag = accepted(&out, "input_dynamics");
+    let out = common::diagnose(&data, "common lag + delay", ModeSelection::Auto);
+    let lag = common::accepted(&out, "input_dynamics");
     assert_eq!(lag.len(), 1, "one input_dynamics step");
     assert_eq!(lag[0].params["support"], "all");
     let pole = lag[0].params["poles"][0]["f_hz"].as_f64().unwrap();
@@ -118,12 +97,12 @@ fn a_common_lag_with_an_undeclared_delay_are_both_found() {
         (pole / f_c - 1.0).abs() < 0.03,
         "lag at {pole:.1} Hz, made at {f_c}"
     );
-    let delay = accepted(&out, "delay");
+    let delay = common::accepted(&out, "delay");
     assert_eq!(delay.len(), 1, "one delay step");
     let total = out.summary.final_model.delay_s;
     println!("final delay {:.2} us", total * 1e6);
     for e in ["feedthrough", "output_dynamics", "missed_mode"] {
-        assert!(accepted(&out, e).is_empty(), "no {e} step");
+        assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
     assert_eq!(out.summary.verdict, "noise_limited");
     let med = common::median_rel_vs_truth(&out, &clean, 0.0, f64::MAX);

@@ -11,31 +11,8 @@ use additive_riv::ModeSelection;
 use experiment::synth::FlexibleMode;
 use faer::Mat;
 use frf_data::Frf;
-use frfit::pipeline::{run, PipelineConfig, PipelineOutput};
-use frfit::summary::StepSummary;
+use frfit::pipeline::PipelineOutput;
 use realize::{DynamicsFactor, FactorTarget};
-
-/// Runs the diagnosis on `data` with `modes` and prints its steps.
-fn diagnose(data: &Frf, name: &str, modes: ModeSelection) -> PipelineOutput {
-    let cfg = PipelineConfig {
-        diagnose: true,
-        modes,
-        ..Default::default()
-    };
-    let t = std::time::Instant::now();
-    let out = run(data, name, &cfg, "diagnose").unwrap();
-    common::print_steps(name, &out);
-    println!("  diagnosis took {:.1} s", t.elapsed().as_secs_f64());
-    out
-}
-
-fn accepted<'a>(out: &'a PipelineOutput, effect: &str) -> Vec<&'a StepSummary> {
-    out.summary
-        .steps
-        .iter()
-        .filter(|s| s.accepted && s.effect == effect)
-        .collect()
-}
 
 /// The simulation set-up of these tests: 4 periods x 10 realizations, lines 1 Hz apart.
 fn sim() -> common::Sim {
@@ -78,9 +55,9 @@ fn a_suspension_with_a_missed_mode() {
         extra_modes: vec![hidden],
         ..sim()
     });
-    let out = diagnose(&data, "suspension + missed mode", ModeSelection::Count(17));
+    let out = common::diagnose(&data, "suspension + missed mode", ModeSelection::Count(17));
     assert_near_truth(&out, &clean);
-    let stiff = accepted(&out, "stiffness");
+    let stiff = common::accepted(&out, "stiffness");
     assert_eq!(stiff.len(), 1, "one stiffness step");
     let f = stiff[0].params["f_hz"].as_f64().unwrap();
     assert!(
@@ -88,7 +65,7 @@ fn a_suspension_with_a_missed_mode() {
         "suspension at {f:.3} Hz, made {f_s}"
     );
     let near = |f: f64| (f / f_m - 1.0).abs() <= 0.005;
-    let in_loop = accepted(&out, "missed_mode")
+    let in_loop = common::accepted(&out, "missed_mode")
         .iter()
         .any(|s| near(s.params["f_hz"].as_f64().unwrap()));
     let in_initial = out.summary.initial.modes.iter().any(|m| near(m.f_hz));
@@ -96,7 +73,7 @@ fn a_suspension_with_a_missed_mode() {
     assert!(in_loop || in_initial, "the mode at {f_m} Hz is found");
     assert!(out.summary.final_model.modes.iter().any(|m| near(m.f_hz)));
     for e in ["delay", "feedthrough", "input_dynamics", "output_dynamics"] {
-        assert!(accepted(&out, e).is_empty(), "no {e} step");
+        assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
 }
 
@@ -122,15 +99,15 @@ fn feedthrough_with_resonance(seed: u64, f_r: f64) {
         )],
         ..sim()
     });
-    let out = diagnose(&data, "feedthrough + sensor resonance", ModeSelection::Auto);
+    let out = common::diagnose(&data, "feedthrough + sensor resonance", ModeSelection::Auto);
     assert_eq!(
-        accepted(&out, "feedthrough").len(),
+        common::accepted(&out, "feedthrough").len(),
         1,
         "one feedthrough step"
     );
     common::assert_output_resonance(&out, 2, f_r, zeta);
     for e in ["delay", "input_dynamics", "missed_mode"] {
-        assert!(accepted(&out, e).is_empty(), "no {e} step");
+        assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
     assert_near_truth(&out, &clean);
 }
@@ -167,10 +144,10 @@ fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64) {
         seed,
         ..sim()
     });
-    let out = diagnose(&data, "sensor resonance near a mode", ModeSelection::Auto);
+    let out = common::diagnose(&data, "sensor resonance near a mode", ModeSelection::Auto);
     common::assert_output_resonance(&out, 3, f_r, zeta);
     for e in ["delay", "feedthrough", "input_dynamics", "missed_mode"] {
-        assert!(accepted(&out, e).is_empty(), "no {e} step");
+        assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
     assert_eq!(
         out.summary.final_model.modes.len(),
@@ -199,12 +176,12 @@ fn resonance_above_the_band(seed: u64, f_r: f64) {
         )],
         ..sim()
     });
-    let out = diagnose(
+    let out = common::diagnose(
         &data,
         "sensor resonance above the band",
         ModeSelection::Auto,
     );
-    let steps = accepted(&out, "output_dynamics");
+    let steps = common::accepted(&out, "output_dynamics");
     assert_eq!(steps.len(), 1, "one output_dynamics step");
     let p = &steps[0].params;
     assert_eq!(p["order"], 2);
@@ -215,7 +192,7 @@ fn resonance_above_the_band(seed: u64, f_r: f64) {
         "resonance at {f:.1} Hz, made at {f_r}"
     );
     for e in ["delay", "feedthrough", "input_dynamics", "missed_mode"] {
-        assert!(accepted(&out, e).is_empty(), "no {e} step");
+        assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
     assert_near_truth(&out, &clean);
 }

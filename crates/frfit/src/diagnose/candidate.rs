@@ -730,20 +730,9 @@ fn propose_dynamics(
         let Some(f) = best else { continue };
         any_support = true;
         let start = FactorStart::from_signature(f, order_of(f));
-        let which = vec![f.index + 1];
         let on = format!("{} {}", if input { "input" } else { "output" }, f.index + 1);
         let ev = describe(f, on, &start);
-        let candidate = if input {
-            Candidate::InputDynamics {
-                inputs: which,
-                start,
-            }
-        } else {
-            Candidate::OutputDynamics {
-                outputs: which,
-                start,
-            }
-        };
+        let candidate = one_factor(input, f.index, start);
         if seen(effect, &candidate.key()) {
             continue;
         }

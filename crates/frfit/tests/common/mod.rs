@@ -315,12 +315,7 @@ pub fn assert_output_resonance(
     f_r: f64,
     zeta: f64,
 ) {
-    let steps: Vec<_> = out
-        .summary
-        .steps
-        .iter()
-        .filter(|s| s.accepted && s.effect == "output_dynamics")
-        .collect();
+    let steps = accepted(out, "output_dynamics");
     assert_eq!(steps.len(), 1, "one output_dynamics step");
     let p = &steps[0].params;
     assert_eq!(p["support"], "outputs");
@@ -336,4 +331,35 @@ pub fn assert_output_resonance(
         "resonance at {f:.1} Hz, made at {f_r}"
     );
     assert!((z / zeta - 1.0).abs() < 0.1, "damping {z:.4}, made {zeta}");
+}
+
+/// The accepted steps of `out` that add `effect`.
+pub fn accepted<'a>(
+    out: &'a frfit::pipeline::PipelineOutput,
+    effect: &str,
+) -> Vec<&'a frfit::summary::StepSummary> {
+    out.summary
+        .steps
+        .iter()
+        .filter(|s| s.accepted && s.effect == effect)
+        .collect()
+}
+
+/// Runs the diagnosis on `data` (default settings, modes from `modes`) and prints its
+/// steps and how long it took.
+pub fn diagnose(
+    data: &Frf,
+    name: &str,
+    modes: additive_riv::ModeSelection,
+) -> frfit::pipeline::PipelineOutput {
+    let cfg = frfit::pipeline::PipelineConfig {
+        diagnose: true,
+        modes,
+        ..Default::default()
+    };
+    let t = std::time::Instant::now();
+    let out = frfit::pipeline::run(data, name, &cfg, "diagnose").unwrap();
+    print_steps(name, &out);
+    println!("  diagnosis took {:.1} s", t.elapsed().as_secs_f64());
+    out
 }
