@@ -472,7 +472,14 @@ pub fn final_prediction_error(
 /// and `N` twice the lines times entries of `data`; infinite when `p >= N` or `V` is
 /// not finite.
 fn fpe_of_cost(v: f64, p: usize, data: DynData<'_>) -> f64 {
-    let n = 2.0 * (data.n_lines() * data.n_entries()) as f64;
+    fpe(v, p, data.n_lines() * data.n_entries())
+}
+
+/// Akaike's final prediction error `V (N + p) / (N - p)` of a weighted cost `V` with `p`
+/// real parameters on `N = 2 lines_x_entries` real residuals; infinite when `p >= N` or
+/// `V` is not finite.
+pub(crate) fn fpe(v: f64, p: usize, lines_x_entries: usize) -> f64 {
+    let n = 2.0 * lines_x_entries as f64;
     let p = p as f64;
     if n > p && v.is_finite() {
         v * (n + p) / (n - p)

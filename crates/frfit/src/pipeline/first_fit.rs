@@ -107,30 +107,26 @@ fn second_start(
         ..cfg.clone()
     };
     let fd = &ctx.fit_data;
-    let fpe = |m: &AdditiveModel| {
-        let n = 2.0 * (fd.n * fd.ny * fd.nu) as f64;
-        let p = frf_data::ModelStructure::n_params(m) as f64;
-        let v = additive_riv::complete::cost_of(m, fd);
-        if n > p && v.is_finite() {
-            v * (n + p) / (n - p)
-        } else {
-            f64::INFINITY
+    // the chain's record (cost, parameters, final prediction error) of a fit, unkept
+    let run_of = |f: &FirstFit| {
+        let cost = additive_riv::complete::cost_of(&f.fit.model, fd);
+        let p = frf_data::ModelStructure::n_params(&f.fit.model);
+        crate::chain::ChainRun {
+            chain: f.chain.clone(),
+            cost: Some(cost),
+            n_params: Some(p),
+            fpe: Some(crate::chain::fpe(cost, p, fd.n * fd.ny * fd.nu)),
+            error: None,
+            kept: false,
         }
-    };
-    let run_of = |f: &FirstFit, fpe: f64, kept: bool| crate::chain::ChainRun {
-        chain: f.chain.clone(),
-        cost: Some(additive_riv::complete::cost_of(&f.fit.model, fd)),
-        n_params: Some(frf_data::ModelStructure::n_params(&f.fit.model)),
-        fpe: Some(fpe),
-        error: None,
-        kept,
     };
     let why = if converged {
         format!("left a residual {residual_to_noise:.1} times the noise level")
     } else {
         format!("did not converge ({})", first.fit.convergence.describe())
     };
-    let fpe_first = fpe(&first.fit.model);
+    let mut run_first = run_of(&first);
+    let fpe_first = run_first.fpe.unwrap_or(f64::INFINITY);
     let second = match chain_fit(ctx, &second_cfg, &ctx.fitter_config(&second_cfg)) {
         Ok(s) => s,
         Err(e) => {
@@ -142,12 +138,12 @@ fn second_start(
             return Ok(first);
         }
     };
-    let fpe_second = fpe(&second.fit.model);
+    let mut run_second = run_of(&second);
+    let fpe_second = run_second.fpe.unwrap_or(f64::INFINITY);
     let keep_second = fpe_second < fpe_first;
-    let runs = vec![
-        run_of(&first, fpe_first, !keep_second),
-        run_of(&second, fpe_second, keep_second),
-    ];
+    run_first.kept = !keep_second;
+    run_second.kept = keep_second;
+    let runs = vec![run_first, run_second];
     let note = format!(
         "second start: the {} chain {why}; the {} chain from the start ended with final prediction error {fpe_second:.4e} against {fpe_first:.4e}: {} kept",
         first.chain.join(" -> "),
