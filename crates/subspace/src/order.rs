@@ -37,12 +37,14 @@ pub const RANK_TOL: f64 = 1e-12;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub enum OrderRule {
     /// The default. The order from the singular values (the count above
-    /// `noise_threshold` with the data's variance, the largest gap otherwise), and, when
-    /// the weighting is the data's own inverse variance (the F statistic's noise model
-    /// holds), the rigid-body integrators the singular values missed added by an F test
-    /// on the residue refit (a rigid body weak at the lowest lines sits at the noise
-    /// level of the singular values: the random systems of the tests, and a second
-    /// subspace pass on the flexible part then). The order sweep is not the default: with
+    /// `noise_threshold` with the data's variance, the largest gap otherwise), and the
+    /// rigid-body integrators the singular values missed added by an F test on the
+    /// residue refit (a rigid body weak at the lowest lines sits at the noise level of
+    /// the singular values: the random systems of the tests, and a second subspace pass
+    /// on the flexible part then). Without the data's variance the F statistic's noise
+    /// model is not known to hold, and an integrator must also lower the cost tenfold
+    /// (a missed rigid body dominates the residual: noise-free 7-8 mode systems whose
+    /// largest singular-value gap lies above the rigid body's states). The order sweep is not the default: with
     /// rank-2 residues it may keep a mode's noise-split eigenvalues as two modes (see
     /// [`OrderRule::FTest`]), and it refits the residues at every candidate order
     /// (on the reference wafer stage: 20 s against 2.2 s, and order 41 with a real
