@@ -810,19 +810,7 @@ impl SubspaceInit {
                     };
                     let g = data.values_vec();
                     let (chosen, scores) = f_sweep(&settings, |n| {
-                        let o = proj.observability(n);
-                        let (a, c, _) = shift_a_c(&o, ny).ok()?;
-                        let (b, _, _, _) = self.b_d(&prepared, &a, &c).ok()?;
-                        let (eig, w) = eigen_weights(&a, &b, &c).ok()?;
-                        let ps = classify(
-                            &eig,
-                            &w,
-                            prepared.variable,
-                            prepared.omega[0],
-                            cfg.rigid_fraction,
-                            cfg.max_integrators,
-                            cfg.merge_tol,
-                        );
+                        let ps = self.poles_at(&prepared, &proj, n)?;
                         // the candidate's poles refined (the F test compares minima);
                         // where the refinement fails numerically, the subspace poles
                         let poles = refine_poles(
@@ -1304,6 +1292,32 @@ impl SubspaceInit {
         })
     }
 
+    /// The poles of the order-`n` realisation of the projection: `A`, `C` by the shift
+    /// equations (12), `B` by (17), the eigenvalues classified into pole pairs, real
+    /// poles and integrators; `None` when a step fails numerically (a rank-deficient
+    /// shift equation).
+    fn poles_at(
+        &self,
+        prepared: &crate::prepare::Prepared,
+        proj: &crate::projection::Projected,
+        n: usize,
+    ) -> Option<PoleSet> {
+        let cfg = &self.config;
+        let o = proj.observability(n);
+        let (a, c, _) = shift_a_c(&o, prepared.ny).ok()?;
+        let (b, _, _, _) = self.b_d(prepared, &a, &c).ok()?;
+        let (eig, w) = eigen_weights(&a, &b, &c).ok()?;
+        Some(classify(
+            &eig,
+            &w,
+            prepared.variable,
+            prepared.omega[0],
+            cfg.rigid_fraction,
+            cfg.max_integrators,
+            cfg.merge_tol,
+        ))
+    }
+
     /// Without the data's variance: the orders above the largest-gap proposal `n0`
     /// whose singular values stand above the floor of the projected data (more than
     /// [`FLOOR_FACTOR`] times the smallest positive singular value computed, or the
@@ -1348,21 +1362,8 @@ impl SubspaceInit {
         }
         let (ny, nu, nl) = (prepared.ny, prepared.nu, prepared.n_lines());
         let g = data.values_vec();
-        let cfg = &self.config;
         let cost_at = |n: usize| -> Option<f64> {
-            let o = proj.observability(n);
-            let (a, c, _) = shift_a_c(&o, ny).ok()?;
-            let (b, _, _, _) = self.b_d(prepared, &a, &c).ok()?;
-            let (eig, w) = eigen_weights(&a, &b, &c).ok()?;
-            let ps = classify(
-                &eig,
-                &w,
-                prepared.variable,
-                prepared.omega[0],
-                cfg.rigid_fraction,
-                cfg.max_integrators,
-                cfg.merge_tol,
-            );
+            let ps = self.poles_at(prepared, proj, n)?;
             let (model, _) =
                 fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, factors).ok()?;
             weighted_cost(&model, data, weighting).ok()
@@ -1445,21 +1446,10 @@ impl SubspaceInit {
         }
         let n_max = ((r - 1) * ny).min(rank).min(max_order);
         let (n, _) = sv_proposal(sv, n_max, inverse_variance, cfg.noise_threshold);
-        let o = proj.observability(n);
-        let Ok((a, c, _)) = shift_a_c(&o, ny) else {
+        // a pass that cannot be realised is not used
+        let Some(mut poles) = self.poles_at(&flex, &proj, n) else {
             return Ok(None);
         };
-        let (b, _, _, _) = self.b_d(&flex, &a, &c)?;
-        let (eig, w) = eigen_weights(&a, &b, &c)?;
-        let mut poles = classify(
-            &eig,
-            &w,
-            prepared.variable,
-            prepared.omega[0],
-            cfg.rigid_fraction,
-            cfg.max_integrators,
-            cfg.merge_tol,
-        );
         poles.integrators = poles.integrators.max(ps.integrators);
         let (mut model, mut cond) = fit_residues(
             model.ny(),
