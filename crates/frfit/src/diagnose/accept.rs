@@ -82,7 +82,9 @@ pub fn prune(
 /// Converges fully (Algorithm 1 at its default tolerances) from `current`, the model
 /// of the last accepted step, and returns the diagnosis result: the refined model, or
 /// `current` marked as failed when the refinement moved a pole into the right
-/// half-plane; `first` (the first fit) when the result fits worse than it. The messages
+/// half-plane; `first` (the first fit) when the result fits worse than it by more than
+/// `allowed_increase` (the cost the accepted suspended-body readings gave up for a
+/// simpler model of the same physics, `super::suspension_reading`). The messages
 /// of `first` (with the loop's) go to the result; the iterations of the first fit and
 /// of the final refinement are added up (the refits of the candidates are reported per
 /// step).
@@ -91,6 +93,7 @@ pub fn final_refinement(
     cfg: &PipelineConfig,
     mut first: Fit<AdditiveModel>,
     current: AdditiveModel,
+    allowed_increase: f64,
 ) -> Result<Fit<AdditiveModel>, FrfitError> {
     let fd = &ctx.fit_data;
     let full = RivConfig {
@@ -119,7 +122,7 @@ pub fn final_refinement(
     // the loop never ends worse than it started
     let initial_cost = model_cost(&first.model, fd);
     let last_cost = model_cost(&last.model, fd);
-    if last_cost > initial_cost {
+    if last_cost > initial_cost + allowed_increase {
         msgs.push(format!(
             "the diagnosed model fits worse than the first model (cost {last_cost:.4e} > {initial_cost:.4e}); the first model is kept",
         ));

@@ -61,6 +61,11 @@ pub enum Candidate {
         /// Its relative damping as the signature estimated it (the augmentation
         /// clamps it to `[1e-3, 0.9]`).
         zeta: f64,
+        /// The mode (submodel index in the current model) that the suspension replaces:
+        /// the first fit took the suspended body for that mode beside a free rigid body
+        /// that carries (almost) nothing ([`suspended_body`]); `None` for a suspension
+        /// that the residual's low-frequency signature calls for.
+        replaces: Option<usize>,
     },
     /// A dynamics factor of unit static gain on one input column (actuator dynamics),
     /// or, when `inputs` holds every input, common to every entry (an amplifier's
@@ -95,6 +100,9 @@ pub struct FactorStart {
     /// the factor's row or column alone, where the first fit took the factor's
     /// resonance for a mode.
     pub replaces: Vec<usize>,
+    /// The model delay the factor starts with, seconds, when it takes over part of a
+    /// fitted delay ([`traded_common_lag`]); `None`: the delay is left as it is.
+    pub delay_s: Option<f64>,
 }
 
 impl FactorStart {
@@ -108,6 +116,7 @@ impl FactorStart {
                 f_hz: f.second_order.f_hz,
                 zeta: f.second_order.zeta.clamp(0.005, 1.0),
                 replaces: Vec::new(),
+                delay_s: None,
             }
         } else {
             let f_hz = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
@@ -120,6 +129,7 @@ impl FactorStart {
                 f_hz,
                 zeta: 1.0,
                 replaces: Vec::new(),
+                delay_s: None,
             }
         }
     }
@@ -188,12 +198,18 @@ impl Candidate {
                 };
                 let replaced: Vec<String> =
                     start.replaces.iter().map(|i| format!(":m{i}")).collect();
-                format!("{which}:{}{}", start.order, replaced.concat())
+                let traded = if start.delay_s.is_some() { ":d" } else { "" };
+                format!("{which}:{}{}{traded}", start.order, replaced.concat())
             }
             Candidate::Delay {
                 start: DelayStart::DataSlope,
                 ..
             } => "data".into(),
+            Candidate::Stiffness {
+                f_hz,
+                replaces: Some(_),
+                ..
+            } => format!("reading:{}", mode_key(*f_hz)),
             _ => String::new(),
         }
     }
@@ -210,8 +226,21 @@ impl Candidate {
                 ..
             } => augment::with_crosstalk(model),
             Candidate::Feedthrough { .. } => augment::with_feedthrough(model),
-            Candidate::Stiffness { f_hz, zeta } => {
-                augment::with_stiffness(model, *f_hz, zeta.clamp(1e-3, 0.9))
+            Candidate::Stiffness {
+                f_hz,
+                zeta,
+                replaces,
+            } => {
+                let mut m = model.clone();
+                if let Some(i) = *replaces {
+                    if m.submodels.get(i).map(|s| s.kind) != Some(SubmodelKind::Mode) {
+                        return Err(RivError::Structure(format!(
+                            "submodel {i} that the suspension would replace is not a mode"
+                        )));
+                    }
+                    m.remove_submodel(i);
+                }
+                augment::with_stiffness(&m, *f_hz, zeta.clamp(1e-3, 0.9))
             }
             Candidate::InputDynamics { inputs, start } => {
                 dynamics(model, FactorTarget::Input, inputs, model.nu(), start)
@@ -263,7 +292,16 @@ fn dynamics(
         m.remove_submodel(i);
     }
     m.push_dynamics(start.factor(target)?)?;
-    Ok(m)
+    match start.delay_s {
+        Some(d) => {
+            let factor = additive_riv::KnownFactor {
+                delay_s: d,
+                ..m.factor
+            };
+            m.with_factor(factor)
+        }
+        None => Ok(m),
+    }
 }
 
 /// The share of each output row (`rows = true`) or input column of a submodel's
@@ -352,6 +390,7 @@ fn local_modes(
                 f_hz,
                 zeta,
                 replaces: vec![sub],
+                delay_s: None,
             },
         ));
     }
@@ -439,6 +478,7 @@ fn above_band(
             f_hz,
             zeta,
             replaces: Vec::new(),
+            delay_s: None,
         },
     ))
 }
@@ -489,6 +529,168 @@ fn screen_second_order(
         hz /= 2.0;
     }
     best.0.is_finite().then_some((best.1, best.2))
+}
+
+/// The span of [`traded_common_lag`]'s corner grid, in multiples of the top line: a
+/// lag whose corner is far below the top line shows its own curvature to the
+/// first-order signature; one far above it leaves a roll-off below the noise.
+const TRADED_LAG: (f64, f64) = (0.25, 16.0);
+
+/// A first-order factor common to every entry (an amplifier's or sensor's bandwidth)
+/// that takes over part of the model's fitted delay. A lag `1 / (1 + s / w_c)` and a
+/// delay share the phase slope at low frequency: the lag's group delay there is
+/// `1 / w_c`, so a delay fitted without the lag holds it as well, and what the residual
+/// keeps is the lag's magnitude roll-off (`1 / sqrt(1 + (w / w_c)^2)`) against a phase
+/// the delay over-corrects at the top of the band. The common factor tested before the
+/// delay was fitted started from a delay without that share, so it is tried again from
+/// the traded start: corners on a log grid of [`TRADED_LAG`] times the top line,
+/// refined twice around the best, each with the delay lowered by `1 / w_c` (never below
+/// zero) and screened by the cost after the numerator fit (eq. 24: the numerators are
+/// linear given the poles, the delay and the factor). The refit then frees the corner
+/// and the delay together. Returns the start (its `delay_s` set), the numerator-fit
+/// cost of the model as it is and the screened cost; `None` when the model's delay is
+/// not fitted, it already has a common factor, or no grid point fits better.
+fn traded_common_lag(
+    model: &AdditiveModel,
+    an: &ResidualAnalysis,
+    fd: &FitData,
+) -> Option<(FactorStart, f64, f64)> {
+    let common = model.dynamics.iter().any(|d| d.target == FactorTarget::All);
+    if !model.factor.fit_delay || common || model.nu() < 2 || !an.significant {
+        return None;
+    }
+    let f_top = an.freq_hz.last().copied().filter(|f| *f > 0.0)?;
+    let d = model.factor.delay_s;
+    let cost = |f: f64| -> f64 {
+        let traded = d - 1.0 / (std::f64::consts::TAU * f);
+        if traded < 0.0 {
+            return f64::INFINITY;
+        }
+        let mut m = model.clone();
+        m.factor.delay_s = traded;
+        if m.push_dynamics(DynamicsFactor::first_order(FactorTarget::All, f))
+            .is_err()
+        {
+            return f64::INFINITY;
+        }
+        additive_riv::fit_numerators(&mut m, fd).unwrap_or(f64::INFINITY)
+    };
+    let base = additive_riv::fit_numerators(&mut model.clone(), fd).ok()?;
+    let (lo, hi) = TRADED_LAG;
+    let n = 13;
+    let step = (hi / lo).ln() / (n - 1) as f64;
+    let grid: Vec<f64> = (0..n)
+        .map(|a| f_top * lo * (step * a as f64).exp())
+        .collect();
+    let pick = |pts: Vec<f64>| -> (f64, f64) {
+        pts.into_par_iter().map(|f| (cost(f), f)).reduce(
+            || (f64::INFINITY, f_top),
+            |a, b| if b.0 < a.0 { b } else { a },
+        )
+    };
+    let mut best = pick(grid);
+    let mut h = step;
+    for _ in 0..2 {
+        h /= 3.0;
+        let c = best.1.ln();
+        let around = pick([-2.0, -1.0, 1.0, 2.0].map(|k| (c + k * h).exp()).to_vec());
+        if around.0 < best.0 {
+            best = around;
+        }
+    }
+    let (c, f_hz) = best;
+    (c.is_finite() && c < base).then(|| {
+        (
+            FactorStart {
+                order: 1,
+                f_hz,
+                zeta: 1.0,
+                replaces: Vec::new(),
+                delay_s: Some(d - 1.0 / (std::f64::consts::TAU * f_hz)),
+            },
+            base,
+            c,
+        )
+    })
+}
+
+/// The share of the model's response at `omega` (rational part, Frobenius norm) that
+/// submodel `sub` carries.
+fn response_share(model: &AdditiveModel, sub: &additive_riv::Submodel, omega: f64) -> f64 {
+    let (ny, nu) = (model.ny(), model.nu());
+    let mut total = vec![realize::C64::new(0.0, 0.0); ny * nu];
+    model.rational_into(omega, &mut total);
+    let mut basis = Vec::new();
+    model.basis_into(sub, omega, &mut basis);
+    let mut part = vec![realize::C64::new(0.0, 0.0); ny * nu];
+    for (b, coef) in sub.num.iter().zip(&basis) {
+        for j in 0..nu {
+            for i in 0..ny {
+                part[j * ny + i] += *coef * b[(i, j)];
+            }
+        }
+    }
+    let norm = |v: &[realize::C64]| v.iter().map(|z| z.norm_sqr()).sum::<f64>().sqrt();
+    norm(&part) / norm(&total).max(f64::MIN_POSITIVE)
+}
+
+/// The share of the lowest line's response a mode must carry for [`suspended_body`]:
+/// it is what the data show of the body at the bottom of the band.
+const BODY_SHARE: f64 = 0.5;
+
+/// The suspended-body reading of `model`: a body on a suspension whose frequency lies
+/// in the band is, to a first fit that declares a free rigid body, a low mode with the
+/// body's response below it (the body's static compliance `R / w_s^2` instead of the
+/// free body's `R / (j w)^2`), and the rigid body is left with (almost) nothing. When
+/// the lowest mode carries at least [`BODY_SHARE`] of the response at the lowest line
+/// (`omega_low`, rad/s), where a free body would dominate, and the free rigid body at
+/// most half of that mode's share, the candidate is the `stiffness` of the catalogue in
+/// place of both: the suspension `R / (s^2 + 2 zeta w_s s + w_s^2)` at the mode's
+/// frequency and damping. It is tested by the parsimony side of the F test
+/// ([`super::trial::suspended_body`]): the free body's parameters beside the
+/// suspension must not be significant. `None` when the model has no free rigid body or
+/// no mode, or the lowest line does not show the body in the mode.
+pub fn suspended_body(model: &AdditiveModel, omega_low: f64) -> Option<Proposal> {
+    let rb = model
+        .submodels
+        .iter()
+        .find(|s| s.kind == SubmodelKind::RigidBody && s.integrators >= 1)?;
+    if model
+        .submodels
+        .iter()
+        .any(|s| s.kind == SubmodelKind::Suspension)
+    {
+        return None;
+    }
+    let low = model
+        .modes()
+        .into_iter()
+        .filter(|m| m.zeta > 0.0)
+        .min_by(|a, b| a.f_hz.total_cmp(&b.f_hz))?;
+    let mode_share = response_share(model, &model.submodels[low.submodel], omega_low);
+    let rb_share = response_share(model, rb, omega_low);
+    if !(mode_share >= BODY_SHARE && rb_share <= 0.5 * mode_share) {
+        return None;
+    }
+    let evidence = format!(
+        "at the lowest line ({:.2} Hz) the mode at {:.3} Hz (zeta {:.4}) carries {:.0}% of the response and the free rigid body ({} integrator{}) {:.1}%: a body suspended at {:.3} Hz rather than a free one beside a mode?",
+        omega_low / std::f64::consts::TAU,
+        low.f_hz,
+        low.zeta,
+        100.0 * mode_share,
+        rb.integrators,
+        if rb.integrators == 1 { "" } else { "s" },
+        100.0 * rb_share,
+        low.f_hz
+    );
+    Some(Proposal {
+        candidate: Candidate::Stiffness {
+            f_hz: low.f_hz,
+            zeta: low.zeta,
+            replaces: Some(low.submodel),
+        },
+        evidence,
+    })
 }
 
 /// The key of a missed mode at `f_hz` (its frequency to 0.1 Hz).
@@ -657,6 +859,7 @@ pub fn propose(
                 Candidate::Stiffness {
                     f_hz: f,
                     zeta: s.zeta,
+                    replaces: None,
                 },
                 detail(an, Effect::Stiffness),
             );
@@ -793,6 +996,22 @@ fn propose_dynamics(
             start.zeta
         );
         push(candidate, ev);
+    }
+    if let Some((start, base, screened)) = traded_common_lag(model, an, fd) {
+        let ev = format!(
+            "the fitted delay ({:.2} us) may hold the low-frequency group delay 1/w_c of a lag common to every entry (an amplifier's bandwidth), whose magnitude roll-off the residual keeps: a first-order factor at {:.1} Hz with the delay lowered by 1/w_c = {:.2} us to {:.2} us lowers the cost after the numerator fit from {base:.4e} to {screened:.4e}; the refit frees the corner and the delay together",
+            model.factor.delay_s * 1e6,
+            start.f_hz,
+            1e6 / (std::f64::consts::TAU * start.f_hz),
+            start.delay_s.unwrap_or(f64::NAN) * 1e6
+        );
+        let candidate = Candidate::InputDynamics {
+            inputs: (1..=model.nu()).collect(),
+            start,
+        };
+        if !seen(Effect::InputDynamics, &candidate.key()) {
+            push(candidate, ev);
+        }
     }
     let common = &an.common_dynamics;
     if (any_support || supported(common)) && model.nu() > 1 {

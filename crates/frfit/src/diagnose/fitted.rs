@@ -173,7 +173,7 @@ impl FittedEffect {
                     bypasses_delay,
                 }
             }
-            Candidate::Stiffness { f_hz, zeta } => {
+            Candidate::Stiffness { f_hz, zeta, .. } => {
                 let s = m
                     .submodels
                     .iter()

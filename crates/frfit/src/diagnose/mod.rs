@@ -82,6 +82,9 @@ struct State {
     delay_restart: Option<DelayRestart>,
     n_tests: usize,
     n_accepted: usize,
+    /// The cost increase over the first fit that the accepted suspended-body readings
+    /// ([`suspension_reading`]) were allowed: the simpler model fits a little worse.
+    allowed_increase: f64,
 }
 
 /// Runs the diagnosis loop from `first` (the first fit of `ctx.band`, whose response
@@ -120,10 +123,18 @@ pub fn diagnose(
         delay_restart,
         n_tests: 0,
         n_accepted: 0,
+        allowed_increase: 0.0,
     };
     let mut steps: Vec<StepSummary> = Vec::new();
     let mut step_responses = Vec::new();
     let mut stages: Vec<(String, f64)> = Vec::new();
+    let t_reading = std::time::Instant::now();
+    if suspension_reading(ctx, cfg, &riv, &mut st, &mut steps, &mut step_responses)? {
+        stages.push((
+            "diagnose: suspended-body reading".into(),
+            t_reading.elapsed().as_secs_f64(),
+        ));
+    }
     let mut n_round = 0;
     while st.analysis.significant && st.n_accepted < cfg.max_steps {
         let t_round = std::time::Instant::now();
@@ -175,9 +186,11 @@ pub fn diagnose(
             &ctx.residual_config(&st.model),
         )
         .map_err(err("residual analysis"))?;
+        // an accepted effect can leave the body's low mode alone in the lowest lines
+        suspension_reading(ctx, cfg, &riv, &mut st, &mut steps, &mut step_responses)?;
     }
     let t_final = std::time::Instant::now();
-    let fit = accept::final_refinement(ctx, cfg, fit, st.model)?;
+    let fit = accept::final_refinement(ctx, cfg, fit, st.model, st.allowed_increase)?;
     stages.push((
         "diagnose: final refinement".into(),
         t_final.elapsed().as_secs_f64(),
@@ -188,6 +201,74 @@ pub fn diagnose(
         step_responses,
         stages,
     })
+}
+
+/// Tests the suspended-body reading of the current model
+/// ([`candidate::suspended_body`], [`trial::suspended_body`]) once per low mode,
+/// whether or not the residual is significant: a first fit at the noise level can hold
+/// a suspension as a mode beside an empty free body, a model that fits as well but
+/// names the wrong physics. The trial is recorded as a `stiffness` step; when accepted
+/// it becomes the current model. Whether a reading was tested.
+fn suspension_reading(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    riv: &RivConfig,
+    st: &mut State,
+    steps: &mut Vec<StepSummary>,
+    step_responses: &mut Vec<(ResponseGrid, ResponseGrid)>,
+) -> Result<bool, FrfitError> {
+    if st.n_accepted >= cfg.max_steps {
+        return Ok(false);
+    }
+    let omega_low = ctx.omega.iter().copied().fold(f64::INFINITY, f64::min);
+    let Some(p) = candidate::suspended_body(&st.model, omega_low) else {
+        return Ok(false);
+    };
+    let key = (p.candidate.effect(), p.candidate.key());
+    if st.tested.contains(&key) {
+        return Ok(false);
+    }
+    st.tested.push(key);
+    let fd = &ctx.fit_data;
+    let stats = ResidualStats::new(&st.model, fd);
+    let current = Current {
+        model: &st.model,
+        cost: st.cost,
+        stats: &stats,
+    };
+    cfg.progress.step(
+        "diagnose",
+        st.n_tests + 1,
+        None,
+        None,
+        "testing a suspended body in place of a free body and a low mode".to_string(),
+    );
+    st.n_tests += 1;
+    let Some((tr, accepted)) = trial::suspended_body(ctx, cfg, riv, &current, p) else {
+        return Ok(true);
+    };
+    let before = error_stats(&ctx.band, &st.response, &ctx.noise);
+    let after_resp = tr.model.response_at(&ctx.omega);
+    let after = error_stats(&ctx.band, &after_resp, &ctx.noise);
+    for step in step_summaries(&tr, accepted, before, after) {
+        steps.push(step);
+        step_responses.push((st.response.clone(), after_resp.clone()));
+    }
+    if accepted {
+        st.allowed_increase += (tr.cost - st.cost).max(0.0);
+        st.n_accepted += 1;
+        st.cost = tr.cost;
+        st.model = tr.model;
+        st.response = after_resp;
+        st.analysis = analyze_residual(
+            &ctx.band,
+            &st.response,
+            ctx.judging_noise(),
+            &ctx.residual_config(&st.model),
+        )
+        .map_err(err("residual analysis"))?;
+    }
+    Ok(true)
 }
 
 /// One round: the candidates of the current residual and their trials; `None` when

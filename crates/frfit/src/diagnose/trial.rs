@@ -333,6 +333,63 @@ pub fn refit_candidate(
     Some(tr)
 }
 
+/// The suspended-body reading ([`super::candidate::suspended_body`]) tested: the
+/// suspension in place of the free rigid body and the lowest mode, refitted
+/// (numerators, eq. 24, then Algorithm 1 to a coarse tolerance), against the current
+/// model, which is the suspension plus the free body's parameters (the suspension is the
+/// current model with the rigid body's numerator at zero: the two are nested). The F
+/// statistic is that of the free body's parameters beside the suspension (the cost they
+/// explain per parameter over the noise scale of the current model) with its critical
+/// value at `cfg.alpha`; the reading is accepted (`true`) when they are not significant
+/// (F at most critical) and the refit leaves no more unstable parts: the simpler
+/// model, the body on its suspension, is kept. A genuine low mode beside a free body
+/// fails it, since the body's `1 / s^2` carries the lowest lines. `None` when the
+/// augmentation or the refit fails.
+pub fn suspended_body(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    riv: &RivConfig,
+    current: &Current,
+    proposal: Proposal,
+) -> Option<(Trial, bool)> {
+    let fd = &ctx.fit_data;
+    let Proposal {
+        candidate,
+        evidence,
+    } = proposal;
+    let aug = candidate.augment(current.model).ok()?;
+    let Refitted { model: m, cost, .. } = refit(aug, fd, riv).ok()?;
+    let removed = current.model.n_params().saturating_sub(m.n_params()).max(1);
+    let (_, f, f_crit) = f_test(current.model, fd, cost, current.cost, removed, cfg);
+    let stable = super::accept::unstable_parts(&m) <= super::accept::unstable_parts(current.model);
+    let accepted = f <= f_crit && stable;
+    let verdict = if accepted {
+        "not significant: the body on its suspension is kept"
+    } else if stable {
+        "significant: the free body stays, the mode is a mode"
+    } else {
+        "the suspension's refit is unstable: the free body stays"
+    };
+    let evidence = format!(
+        "{evidence} The free rigid body's {removed} parameters beside the suspension explain F = {f:.3} (critical {f_crit:.3}): {verdict}"
+    );
+    let params = FittedEffect::of_refit(&candidate, current.model, &m);
+    Some((
+        Trial {
+            params,
+            evidence,
+            model: m,
+            cost,
+            f,
+            f_crit,
+            added: 0,
+            joint_modes: Vec::new(),
+            screened: None,
+        },
+        accepted,
+    ))
+}
+
 /// Continues a screened trial's refit to convergence from where the screening stopped
 /// and tests it again; a trial that is not screened is returned as it is. `None` when
 /// the continued refit fails.
