@@ -11,14 +11,39 @@ use rand_chacha::ChaCha8Rng;
 use realize::{ModalModel, PolePair};
 use std::f64::consts::TAU;
 
+/// How the body of [`measured`] is held.
+enum Body {
+    /// On a suspension at this frequency, Hz (damping 0.05).
+    Suspended(f64),
+    /// Free (`R / s^2`), with a mode at `.0` Hz (damping 0.05) whose residue is `.1`
+    /// times the body's, shape alike.
+    FreeWithLowMode(f64, f64),
+}
+
 /// Suspension at `f_s` Hz (damping 0.05) and three modes at 40, 95 and 210 Hz, measured
 /// at 600 log-spaced lines over 4..400 Hz with complex Gaussian noise of 0.2 % of each
 /// value, its variance attached.
 fn suspended(f_s: f64, seed: u64) -> Frf {
+    measured(Body::Suspended(f_s), 4.0, seed)
+}
+
+/// The body of `body` and three modes at 40, 95 and 210 Hz, measured at 600
+/// log-spaced lines over `lo_hz..400` Hz with complex Gaussian noise of 0.2 % of each
+/// value, its variance attached.
+fn measured(body: Body, lo_hz: f64, seed: u64) -> Frf {
     let (ny, nu) = (2, 3);
     let mut m = ModalModel::new(ny, nu);
     let r = Mat::from_fn(ny, nu, |i, j| 1e-3 * (0.6 + 0.2 * (i + j) as f64));
-    m.pairs.push(PolePair::from_second_order(f_s, 0.05, &r));
+    match body {
+        Body::Suspended(f_s) => m.pairs.push(PolePair::from_second_order(f_s, 0.05, &r)),
+        Body::FreeWithLowMode(f_l, gain) => {
+            m.rigid = vec![Mat::zeros(ny, nu), r.clone()];
+            let b = Mat::from_fn(ny, nu, |i, j| {
+                gain * r[(i, j)] * (1.0 + 0.3 * (i as f64 - j as f64))
+            });
+            m.pairs.push(PolePair::from_second_order(f_l, 0.05, &b));
+        }
+    }
     let shapes = [
         ([1.0, 0.5], [0.8, -0.4, 0.3]),
         ([0.4, -1.0], [0.3, 1.0, 0.7]),
@@ -30,7 +55,7 @@ fn suspended(f_s: f64, seed: u64) -> Frf {
     }
     let n = 600;
     let freqs: Vec<f64> = (0..n)
-        .map(|k| 4.0 * 100f64.powf(k as f64 / (n - 1) as f64))
+        .map(|k| lo_hz * (400.0 / lo_hz).powf(k as f64 / (n - 1) as f64))
         .collect();
     let w: Vec<f64> = freqs.iter().map(|f| TAU * f).collect();
     let g = m.freq_response(&w).unwrap();
@@ -90,4 +115,55 @@ fn a_suspension_stiffness_is_found() {
     assert_eq!(s.final_model.rigid_body_integrators, 0);
     assert_eq!(s.verdict, "noise_limited");
     assert_eq!(s.final_model.modes.len(), 3);
+}
+
+/// A genuine low mode beside a free body is not a suspension: a mode at 3 Hz with
+/// five times the body's residue, lines from 2 Hz, where the mode carries most of the
+/// lowest lines but the free body's `R / s^2` a significant part beside it. Whether or not the suspended-body reading is tested,
+/// no stiffness is accepted, and the final model keeps the free body (two integrators)
+/// and the mode.
+#[test]
+#[ignore = "known failure (the first fit and the signature-proposed stiffness, not the suspended-body reading, which runs only at the noise level): the first fit ends at residual/noise 141 (median 2.3e-2) and the loop's stiffness candidate from the low-frequency signature replaces the free body by a suspension at 3.004 Hz beside the 3 Hz mode (F = 3.8e5), then adds an input factor and ends unexplained at 13.5x the noise; the same with mode residues 2..10 times the body's and lines from 1..2 Hz; run with --ignored"]
+fn a_low_mode_beside_a_free_body_is_not_a_stiffness() {
+    let f_l = 3.0;
+    let data = measured(Body::FreeWithLowMode(f_l, 5.0), 2.0, 11);
+    let cfg = PipelineConfig {
+        diagnose: true,
+        ..Default::default()
+    };
+    let out = run(&data, "free body with a low mode", &cfg, "diagnose").unwrap();
+    let s = &out.summary;
+    println!("initial {:?}", s.initial.errors);
+    for st in &s.steps {
+        println!(
+            "  {} accepted={} F={:.3} (crit {:.3}) {} {} median {:.3e} -> {:.3e}",
+            st.effect,
+            st.accepted,
+            st.f_statistic,
+            st.f_critical,
+            st.params,
+            st.evidence,
+            st.before.median_rel,
+            st.after.median_rel
+        );
+    }
+    println!(
+        "verdict {} final {:?}: {}",
+        s.verdict, s.final_errors, s.verdict_evidence
+    );
+    assert!(
+        !s.steps
+            .iter()
+            .any(|x| x.accepted && x.effect == "stiffness"),
+        "no stiffness step"
+    );
+    assert_eq!(s.final_model.rigid_body_integrators, 2, "the free body");
+    assert!(
+        s.final_model
+            .modes
+            .iter()
+            .any(|m| (m.f_hz / f_l - 1.0).abs() < 0.02),
+        "the low mode"
+    );
+    assert_eq!(s.verdict, "noise_limited");
 }

@@ -642,7 +642,7 @@ const BODY_SHARE: f64 = 0.5;
 /// in the band is, to a first fit that declares a free rigid body, a low mode with the
 /// body's response below it (the body's static compliance `R / w_s^2` instead of the
 /// free body's `R / (j w)^2`), and the rigid body is left with (almost) nothing. When
-/// the lowest mode carries at least [`BODY_SHARE`] of the response at the lowest line
+/// a mode (the one that carries the most there) carries at least [`BODY_SHARE`] of the response at the lowest line
 /// (`omega_low`, rad/s), where a free body would dominate, and the free rigid body at
 /// most half of that mode's share, the candidate is the `stiffness` of the catalogue in
 /// place of both: the suspension `R / (s^2 + 2 zeta w_s s + w_s^2)` at the mode's
@@ -662,12 +662,17 @@ pub fn suspended_body(model: &AdditiveModel, omega_low: f64) -> Option<Proposal>
     {
         return None;
     }
-    let low = model
+    // the mode that carries the lowest line (not merely the lowest one: a first fit can
+    // put a weak duplicate just below it)
+    let (low, mode_share) = model
         .modes()
         .into_iter()
         .filter(|m| m.zeta > 0.0)
-        .min_by(|a, b| a.f_hz.total_cmp(&b.f_hz))?;
-    let mode_share = response_share(model, &model.submodels[low.submodel], omega_low);
+        .map(|m| {
+            let share = response_share(model, &model.submodels[m.submodel], omega_low);
+            (m, share)
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
     let rb_share = response_share(model, rb, omega_low);
     if !(mode_share >= BODY_SHARE && rb_share <= 0.5 * mode_share) {
         return None;

@@ -186,7 +186,8 @@ pub fn diagnose(
             &ctx.residual_config(&st.model),
         )
         .map_err(err("residual analysis"))?;
-        // an accepted effect can leave the body's low mode alone in the lowest lines
+        // a loop that reaches the noise level can leave the body's low mode beside an
+        // empty free body
         suspension_reading(ctx, cfg, &riv, &mut st, &mut steps, &mut step_responses)?;
     }
     let t_final = std::time::Instant::now();
@@ -204,10 +205,11 @@ pub fn diagnose(
 }
 
 /// Tests the suspended-body reading of the current model
-/// ([`candidate::suspended_body`], [`trial::suspended_body`]) once per low mode,
-/// whether or not the residual is significant: a first fit at the noise level can hold
-/// a suspension as a mode beside an empty free body, a model that fits as well but
-/// names the wrong physics. The trial is recorded as a `stiffness` step; when accepted
+/// ([`candidate::suspended_body`], [`trial::suspended_body`]) once per low mode, when
+/// its residual is at the noise level (a significant residual goes to the loop's
+/// candidates first, the signature-proposed `stiffness` among them): a model at the
+/// noise level can hold a suspension as a mode beside an empty free body, a model that
+/// fits as well but names the wrong physics. The trial is recorded as a `stiffness` step; when accepted
 /// it becomes the current model. Whether a reading was tested.
 fn suspension_reading(
     ctx: &FitContext,
@@ -217,7 +219,7 @@ fn suspension_reading(
     steps: &mut Vec<StepSummary>,
     step_responses: &mut Vec<(ResponseGrid, ResponseGrid)>,
 ) -> Result<bool, FrfitError> {
-    if st.n_accepted >= cfg.max_steps {
+    if st.analysis.significant || st.n_accepted >= cfg.max_steps {
         return Ok(false);
     }
     let omega_low = ctx.omega.iter().copied().fold(f64::INFINITY, f64::min);
