@@ -87,6 +87,20 @@ struct State {
     allowed_increase: f64,
 }
 
+impl State {
+    /// The residual analysis of the current model's response, after a change of model.
+    fn reanalyze(&mut self, ctx: &FitContext) -> Result<(), FrfitError> {
+        self.analysis = analyze_residual(
+            &ctx.band,
+            &self.response,
+            ctx.judging_noise(),
+            &ctx.residual_config(&self.model),
+        )
+        .map_err(err("residual analysis"))?;
+        Ok(())
+    }
+}
+
 /// Runs the diagnosis loop from `first` (the first fit of `ctx.band`, whose response
 /// at the band's lines is `first_response`); `delay_restart` is the delay restart that
 /// [`better_first_fit`] made already, if any.
@@ -179,13 +193,7 @@ pub fn diagnose(
         st.cost = model_cost(&m, fd);
         st.response = m.response_at(&ctx.omega);
         st.model = m;
-        st.analysis = analyze_residual(
-            &ctx.band,
-            &st.response,
-            ctx.judging_noise(),
-            &ctx.residual_config(&st.model),
-        )
-        .map_err(err("residual analysis"))?;
+        st.reanalyze(ctx)?;
         // a loop that reaches the noise level can leave the body's low mode beside an
         // empty free body
         suspension_reading(ctx, cfg, &riv, &mut st, &mut steps, &mut step_responses)?;
@@ -262,13 +270,7 @@ fn suspension_reading(
         st.cost = tr.cost;
         st.model = tr.model;
         st.response = after_resp;
-        st.analysis = analyze_residual(
-            &ctx.band,
-            &st.response,
-            ctx.judging_noise(),
-            &ctx.residual_config(&st.model),
-        )
-        .map_err(err("residual analysis"))?;
+        st.reanalyze(ctx)?;
     }
     Ok(true)
 }
