@@ -106,13 +106,14 @@ pub struct CompleteConfig {
     pub pair_trials: bool,
     /// When no addition passes, at most this many modes whose damping is at least
     /// [`CompleteConfig::split_zeta`] are each replaced by two modes at their half-power
-    /// points `f (1 -+ zeta)` (the broadest first; see `split_candidates`). Default: 3.
+    /// points `f (1 -+ zeta)` or twice as far apart (the broadest first; see
+    /// `split_candidates`). Default: 3.
     /// 0 turns the splits off.
     pub split_trials: usize,
     /// Damping from which a settled mode is a candidate for a split (the F test of the
-    /// trial decides). Default: 0.08 (the
-    /// broadest lightly damped modes of the harness have 0.04; two modes 1.6x apart
-    /// that one mode covers settle at 0.1 to 0.3).
+    /// trial decides). Default: 0.045 (the broadest lightly damped modes of the
+    /// harness have 0.04; two modes 1.6x apart that one mode covers settle at 0.1 to
+    /// 0.3, and a missed neighbour widens a mode to about 0.05).
     pub split_zeta: f64,
 }
 
@@ -357,12 +358,7 @@ fn prune_insignificant(
     let n_modes = cur.modes().len();
     // the weighted data's energy: a mode that explains less than the rounding floor of
     // it explains nothing, whatever its F statistic against a rounding-level residual
-    let energy: f64 = data
-        .w
-        .iter()
-        .zip(&data.g)
-        .map(|(w, g)| w * g.norm_sqr())
-        .sum();
+    let energy = data.weighted_energy();
     for _ in 0..n_modes {
         let Ok(dv) = submodel_cost_increase(&cur, data) else {
             break;
@@ -608,18 +604,15 @@ fn scan_candidates(
         .collect()
 }
 
-/// Adds a mode at `f_hz` with damping `zeta` to `model`; a frequency inside the
-/// bandwidth of an existing mode (closer than `DUPLICATE` of its half-power half-width)
-/// is moved half a half-width away from it on its own side, so that the two poles start
-/// apart (the split of a mode that is really two).
 /// A trial of [`complete_start`]: the submodel it replaces (a split), and the modes it
 /// adds (frequency in Hz, damping when known).
 type Trial = (Option<usize>, Vec<(f64, Option<f64>)>);
 
 /// The split trials of [`complete_start`]: the modes of `model` whose damping is at
-/// least [`CompleteConfig::split_zeta`], the broadest first (at most [`CompleteConfig::split_trials`]), each as the
-/// mode to replace and two modes at its half-power points `f (1 -+ zeta)` with a third
-/// of its damping. On a start that missed modes, the pole settling lets one mode cover
+/// least [`CompleteConfig::split_zeta`], the broadest first (at most
+/// [`CompleteConfig::split_trials`]), each as the mode to replace and two modes at its
+/// half-power points `f (1 -+ zeta)`, and at twice that distance, with a third of its
+/// damping. On a start that missed modes, the pole settling lets one mode cover
 /// two neighbours (1.4-1.8 apart) as a broad resonance at damping 0.1 to 0.3; the
 /// residual then shows no peak of its own at either, and a mode added beside the broad
 /// one settles onto its pole.
@@ -660,6 +653,10 @@ fn split_candidates(model: &AdditiveModel, cfg: &CompleteConfig) -> Vec<Trial> {
         .collect()
 }
 
+/// Adds a mode at `f_hz` with damping `zeta` to `model`; a frequency inside the
+/// bandwidth of an existing mode (closer than `DUPLICATE` of its half-power half-width)
+/// is moved half a half-width away from it on its own side, so that the two poles start
+/// apart (the split of a mode that is really two).
 fn push_candidate(model: &mut AdditiveModel, f_hz: f64, zeta: f64) -> Result<(), RivError> {
     const DUPLICATE: f64 = 0.25;
     let mut f = f_hz;
@@ -743,12 +740,7 @@ pub fn complete_start(
     // round-off level of it is exact, and no statistical test can judge a mode added
     // to it (on a noise-free single-mode system an added mode at damping 0.76 passed
     // the F test on costs of 1e-25, and the refiner drove it off the stable region)
-    let energy: f64 = data
-        .g
-        .iter()
-        .zip(&data.w)
-        .map(|(g, w)| w * g.norm_sqr())
-        .sum();
+    let energy = data.weighted_energy();
     let exact = |v: f64| v <= EXACT_FIT_REL * energy;
     if add_modes {
         for round in 0..cfg.max_rounds {
@@ -791,8 +783,7 @@ pub fn complete_start(
                     }
                 }
                 if c == trials.len() && !split {
-                    // a broad mode that settled over two true ones (damping far above
-                    // the others') is split into two at its half-power points
+                    // a broad mode that settled over two true ones is split in two
                     split = true;
                     trials.extend(split_candidates(&cur, cfg));
                 }

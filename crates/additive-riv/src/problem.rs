@@ -122,6 +122,15 @@ impl FitData {
         self.ny * self.nu
     }
 
+    /// The weighted energy of the data, `sum w |G|^2`: the cost of the zero model.
+    pub fn weighted_energy(&self) -> f64 {
+        self.w
+            .iter()
+            .zip(&self.g)
+            .map(|(w, g)| w * g.norm_sqr())
+            .sum()
+    }
+
     /// Number of real observations with a positive weight.
     pub fn observations(&self) -> usize {
         2 * self.w.iter().filter(|&&x| x > 0.0).count()

@@ -167,13 +167,9 @@ pub fn diagnose(
         let best = accept::best(&trials, &st.model, st.cost);
         let mut accepted_model = None;
         for (i, tr) in trials.into_iter().enumerate() {
-            let after_resp = tr.model.response_at(&ctx.omega);
-            let after = error_stats(&ctx.band, &after_resp, &ctx.noise);
             let accepted = Some(i) == best;
-            for step in step_summaries(&tr, accepted, before, after) {
-                steps.push(step);
-                step_responses.push((st.response.clone(), after_resp.clone()));
-            }
+            let before = (&st.response, before);
+            record_trial(ctx, &tr, accepted, before, &mut steps, &mut step_responses);
             if accepted {
                 accepted_model = Some((tr.model, tr.cost));
             }
@@ -258,12 +254,14 @@ fn suspension_reading(
         return Ok(true);
     };
     let before = error_stats(&ctx.band, &st.response, &ctx.noise);
-    let after_resp = tr.model.response_at(&ctx.omega);
-    let after = error_stats(&ctx.band, &after_resp, &ctx.noise);
-    for step in step_summaries(&tr, accepted, before, after) {
-        steps.push(step);
-        step_responses.push((st.response.clone(), after_resp.clone()));
-    }
+    let after_resp = record_trial(
+        ctx,
+        &tr,
+        accepted,
+        (&st.response, before),
+        steps,
+        step_responses,
+    );
     if accepted {
         st.allowed_increase += (tr.cost - st.cost).max(0.0);
         st.n_accepted += 1;
@@ -449,6 +447,26 @@ enum Job {
     DelayRestart(Box<Option<DelayRestart>>),
     /// One proposed candidate ([`trial::refit_candidate`]).
     Candidate(Proposal),
+}
+
+/// Records trial `tr` (accepted or not) as its steps, each with the response before it
+/// (`before`: the response and its error statistics) and the one after it; returns the
+/// response after it.
+fn record_trial(
+    ctx: &FitContext,
+    tr: &Trial,
+    accepted: bool,
+    (before_resp, before): (&ResponseGrid, ErrorStats),
+    steps: &mut Vec<StepSummary>,
+    step_responses: &mut Vec<(ResponseGrid, ResponseGrid)>,
+) -> ResponseGrid {
+    let after_resp = tr.model.response_at(&ctx.omega);
+    let after = error_stats(&ctx.band, &after_resp, &ctx.noise);
+    for step in step_summaries(tr, accepted, before, after) {
+        steps.push(step);
+        step_responses.push((before_resp.clone(), after_resp.clone()));
+    }
+    after_resp
 }
 
 /// The steps of `tr`: one, or for a joint missed-mode trial one per mode it added.
