@@ -38,6 +38,15 @@ pub struct Args {
     /// Seed of the plants.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Band of the lines and the modes, `LO:HI` Hz.
+    #[arg(long, default_value = "50:2000")]
+    pub band: String,
+    /// Give the plants a free rigid body (a double integrator of rank min(3, ny, nu)).
+    #[arg(long)]
+    pub rigid_body: bool,
+    /// Keep each plant's data file (`OUT/SIZE.csv`) for a rerun by hand.
+    #[arg(long)]
+    pub keep_data: bool,
     /// Initialiser(s) of the chain (`frfit fit --init`).
     #[arg(long, default_value = "subspace")]
     pub init: String,
@@ -77,6 +86,23 @@ fn parse_size(s: &str) -> Result<(usize, usize, usize), Error> {
     match v.as_slice() {
         [ny, nu, k] if *ny > 0 && *nu > 0 => Ok((*ny, *nu, *k)),
         _ => Err(Error::new("--sizes", format!("`{s}` is not NYxNUxMODES"))),
+    }
+}
+
+fn parse_band(s: &str) -> Result<(f64, f64), Error> {
+    let bad = || {
+        Error::new(
+            "--band",
+            format!("`{s}` is not LO:HI in Hz with 0 < LO < HI"),
+        )
+    };
+    let (lo, hi) = s.split_once(':').ok_or_else(bad)?;
+    let lo: f64 = lo.trim().parse().map_err(|_| bad())?;
+    let hi: f64 = hi.trim().parse().map_err(|_| bad())?;
+    if lo > 0.0 && hi > lo && hi.is_finite() {
+        Ok((lo, hi))
+    } else {
+        Err(bad())
     }
 }
 
@@ -179,6 +205,7 @@ pub fn run(a: Args) -> Result<(), Error> {
         .split(',')
         .map(parse_size)
         .collect::<Result<_, _>>()?;
+    let band_hz = parse_band(&a.band)?;
     std::fs::create_dir_all(&a.out).stage("output directory")?;
     let bin = frfit_binary()?;
     let mut rows = Vec::new();
@@ -190,7 +217,8 @@ pub fn run(a: Args) -> Result<(), Error> {
             nu,
             modes: k,
             lines: a.lines,
-            band_hz: (50.0, 2000.0),
+            band_hz,
+            rigid_body: a.rigid_body,
             noise: a.noise,
             seed: a.seed,
             ..RandomModalConfig::default()
@@ -234,11 +262,24 @@ pub fn run(a: Args) -> Result<(), Error> {
             peak_mb,
             outcome,
         });
-        std::fs::remove_file(&data).ok();
+        if !a.keep_data {
+            std::fs::remove_file(&data).ok();
+        }
     }
     let mut md = format!(
-        "# frfit fit at scale\n\n`--init {} --refine {}`, {} uniform lines 50..2000 Hz, relative noise {:.0e}, seed {}, rank-one modes with 10 % close pairs (`frfit simulate random-modal`).\n\n| size (ny x nu x modes) | wall [s] | peak RSS [MB] | modes within 0.1 % | fitted modes | median error vs noiseless | noise std / median abs | last link |\n|---|---|---|---|---|---|---|---|\n",
-        a.init, a.refine, a.lines, a.noise, a.seed
+        "# frfit fit at scale\n\n`--init {} --refine {}`, {} uniform lines {}..{} Hz, relative noise {:.0e}, seed {}, rank-one modes with 10 % close pairs{} (`frfit simulate random-modal`).\n\n| size (ny x nu x modes) | wall [s] | peak RSS [MB] | modes within 0.1 % | fitted modes | median error vs noiseless | noise std / median abs | last link |\n|---|---|---|---|---|---|---|---|\n",
+        a.init,
+        a.refine,
+        a.lines,
+        band_hz.0,
+        band_hz.1,
+        a.noise,
+        a.seed,
+        if a.rigid_body {
+            ", a free rigid body"
+        } else {
+            ""
+        }
     );
     for r in &rows {
         let mem = r.peak_mb.map_or("n/a".into(), |m| format!("{m:.0}"));

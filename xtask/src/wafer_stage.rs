@@ -151,7 +151,7 @@ fn write_model_and_report(
         "Simulated wafer stage (seed {seed}): frfit diagnose of {}",
         data_path.display()
     );
-    let input = out.report_input(&title);
+    let input = out.report_input(&title).stage("report")?;
     let mut written = vec![model_path];
     written.extend(write_report(dir, &input, &out.summary).stage("report")?);
     Ok(written)

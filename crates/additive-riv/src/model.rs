@@ -1182,6 +1182,16 @@ impl ModelStructure for AdditiveModel {
         }
         Ok(())
     }
+    /// The response at `omega`, the lines in blocks on the rayon pool when the grid is
+    /// large (thousands of lines of hundreds of entries).
+    fn response_at(&self, omega: &[f64]) -> realize::ResponseGrid {
+        let mut g = realize::ResponseGrid::zeros(omega.len(), self.ny, self.nu);
+        let coefficients: usize = self.submodels.iter().map(|s| s.num.len()).sum();
+        g.fill_lines(8 * (coefficients + 1) * self.ny * self.nu, |k, line| {
+            self.response_into(omega[k], line)
+        });
+        g
+    }
     fn response_into(&self, omega: f64, out: &mut [C64]) {
         self.rational_part_into(omega, out, false);
         if !self.factor.is_identity() {

@@ -69,7 +69,8 @@ pub struct MlConfig {
     pub max_condition: f64,
     /// Modes the refinement may add where the residual shows a resonance the start
     /// missed (only with a measured variance, while the cost test rejects the model at
-    /// 1e-3). Default: 4; 0 keeps the start's structure.
+    /// 1e-3). Several resonances clear of the model's modes are added in one refinement
+    /// (see the messages). Default: 4; 0 keeps the start's structure.
     pub add_modes: usize,
     /// Smallest F statistic (cost explained per added parameter over the noise scale)
     /// for an added mode to be kept. Default: 25.
@@ -260,13 +261,23 @@ fn expected_ratio(realizations: Option<usize>) -> f64 {
     }
 }
 
-/// The frequency (Hz) of the largest peak of the weighted residual energy
-/// `sum_e w |G - P|^2` per line (smoothed over 5 lines), away (more than two lines)
-/// from the model's modes; `None` when there is none.
-fn residual_peak(prob: &Problem, theta: &[f64], coef: &[f64], w: &[f64]) -> Option<f64> {
+/// Where the residual calls for modes the model lacks, strongest first: the line of the
+/// largest (five-line smoothed) weighted residual energy away from the model's modes
+/// (within two line spacings of a mode its own misfit is the residual's cause), then,
+/// up to `max` in all, the other local maxima of that energy that stand clear of every
+/// mode (beyond three half-power bandwidths, where the misfit of a mode no longer
+/// reaches), above [`GROUP_PEAK_FRACTION`] of the largest and [`GROUP_PEAK_OVER_MEDIAN`]
+/// times the median line: resonances the start missed altogether, which one refinement
+/// can add together instead of one refinement each. Frequencies in Hz.
+fn residual_peaks(prob: &Problem, theta: &[f64], coef: &[f64], w: &[f64], max: usize) -> Vec<f64> {
     let fm = prob.model(theta, coef);
-    let resp = fm.freq_response(&prob.omega).ok()?;
+    let Ok(resp) = fm.freq_response(&prob.omega) else {
+        return Vec::new();
+    };
     let (n, m) = (prob.omega.len(), prob.lay.m());
+    if n == 0 || max == 0 {
+        return Vec::new();
+    }
     let s: Vec<f64> = (0..n)
         .map(|k| {
             (0..m)
@@ -284,11 +295,51 @@ fn residual_peak(prob: &Problem, theta: &[f64], coef: &[f64], w: &[f64]) -> Opti
             .iter()
             .any(|p| (p.omega_n() - wk).abs() <= 2.0 * dw)
     };
-    (0..n)
+    let Some(top) = (0..n)
         .filter(|&k| !near(prob.omega[k]))
         .max_by(|&a, &b| smooth[a].total_cmp(&smooth[b]))
-        .map(|k| prob.omega[k] / TAU)
+    else {
+        return Vec::new();
+    };
+    let mut peaks = vec![top];
+    let clear = |wk: f64| {
+        fm.modal.pairs.iter().all(|p| {
+            let wn = p.omega_n();
+            (wn - wk).abs() > (3.0 * p.zeta().abs() * wn).max(2.0 * dw)
+        })
+    };
+    let mut sorted = smooth.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[n / 2];
+    let floor = (GROUP_PEAK_FRACTION * smooth[top]).max(GROUP_PEAK_OVER_MEDIAN * median);
+    let half = GROUP_PEAK_HALF_WINDOW.max(n / 400);
+    let mut others: Vec<usize> = (0..n)
+        .filter(|&k| {
+            k != top
+                && smooth[k] >= floor
+                && (k.saturating_sub(half)..(k + half + 1).min(n)).all(|j| smooth[j] <= smooth[k])
+                && clear(prob.omega[k])
+        })
+        .collect();
+    others.sort_by(|&a, &b| smooth[b].total_cmp(&smooth[a]));
+    for k in others {
+        if peaks.len() >= max {
+            break;
+        }
+        if peaks.iter().all(|&q: &usize| q.abs_diff(k) > half) {
+            peaks.push(k);
+        }
+    }
+    peaks.into_iter().map(|k| prob.omega[k] / TAU).collect()
 }
+
+/// A further residual peak joins the group of added modes above this fraction of the
+/// largest one ([`residual_peaks`]).
+const GROUP_PEAK_FRACTION: f64 = 0.05;
+/// ... and above this many times the median line's smoothed residual energy.
+const GROUP_PEAK_OVER_MEDIAN: f64 = 20.0;
+/// Lines either side within which a residual peak must be the largest.
+const GROUP_PEAK_HALF_WINDOW: usize = 5;
 
 impl Estimator for MlRefine {
     type Model = FrfModel;
@@ -532,56 +583,106 @@ impl MlRefine {
             if p >= 1e-3 || out.eval.cost / dof <= 2.0 * expected {
                 break;
             }
-            let Some(f_new) = residual_peak(&prob, &out.theta, &out.eval.coef, &w) else {
-                break;
-            };
-            let mut lay2 = lay.clone();
-            lay2.n_pairs += 1;
-            let n_params2 = lay2.n_nl() + m * lay2.n_lin();
-            if 2 * n < lay2.n_lin() + lay2.n_nl() + 1 || 2 * n * m <= n_params2 {
+            let peaks = residual_peaks(
+                &prob,
+                &out.theta,
+                &out.eval.coef,
+                &w,
+                cfg.add_modes - added.len(),
+            );
+            if peaks.is_empty() {
                 break;
             }
-            let np = lay.n_pairs;
-            let wn = TAU * f_new;
-            let z0 = 0.01;
-            let mut theta2 = out.theta[..2 * np].to_vec();
-            theta2.extend([-z0 * wn, wn * (1.0 - z0 * z0).sqrt()]);
-            theta2.extend_from_slice(&out.theta[2 * np..]);
-            let prob2 = Problem::new(
-                lay2.clone(),
-                prob.omega.clone(),
-                prob.g.clone(),
-                prob.sw.clone(),
-                model.clone(),
-            );
-            let Ok(ev2) = prob2.evaluate(&theta2) else {
+            // the modes at the given peaks added to the current optimum and refined
+            // together; `None` when the data cannot carry them
+            let refine_with = |new_f: &[f64]| {
+                let mut lay2 = lay.clone();
+                lay2.n_pairs += new_f.len();
+                let n_params2 = lay2.n_nl() + m * lay2.n_lin();
+                if 2 * n < lay2.n_lin() + lay2.n_nl() + 1 || 2 * n * m <= n_params2 {
+                    return None;
+                }
+                let np = lay.n_pairs;
+                let z0 = 0.01;
+                let mut theta2 = out.theta[..2 * np].to_vec();
+                for &f in new_f {
+                    let wn = TAU * f;
+                    theta2.extend([-z0 * wn, wn * (1.0 - z0 * z0).sqrt()]);
+                }
+                theta2.extend_from_slice(&out.theta[2 * np..]);
+                let prob2 = Problem::new(
+                    lay2.clone(),
+                    prob.omega.clone(),
+                    prob.g.clone(),
+                    prob.sw.clone(),
+                    model.clone(),
+                );
+                let ev2 = prob2.evaluate(&theta2).ok()?;
+                let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
+                let out2 = iterate(
+                    &prob2,
+                    theta2,
+                    ev2,
+                    dof2,
+                    &cfg.lm,
+                    valid(lay2.n_pairs),
+                    leaving(lay2.n_pairs, lay2.n_real),
+                    &cfg.progress,
+                );
+                let f_stat = ((out.eval.cost - out2.eval.cost)
+                    / ((n_params2 - n_params) as f64 / 2.0))
+                    / (out2.eval.cost / dof2);
+                Some((prob2, lay2, n_params2, out2, f_stat))
+            };
+            let passes = |o: &crate::lm::LmOutcome, f_stat: f64| {
+                !f_stat.is_nan() && f_stat > cfg.min_f && o.convergence.is_converged()
+            };
+            // several resonances clear of the model's modes: added together first (one
+            // refinement instead of one each); when the group does not pass, the
+            // strongest alone
+            let mut tried = None;
+            if peaks.len() > 1 {
+                if let Some(t) = refine_with(&peaks) {
+                    work = work.add(t.3.work);
+                    if passes(&t.3, t.4) {
+                        tried = Some((peaks.clone(), t));
+                    } else {
+                        messages.push(format!(
+                            "modes added together at {} Hz (the residual's peaks) did not all hold (F = {:.1}, {}): the strongest alone is tried",
+                            peaks.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
+                            t.4,
+                            t.3.convergence.describe()
+                        ));
+                    }
+                }
+            }
+            if tried.is_none() {
+                let Some(t) = refine_with(&peaks[..1]) else {
+                    break;
+                };
+                work = work.add(t.3.work);
+                if !passes(&t.3, t.4) {
+                    messages.push(format!(
+                        "a mode added at {:.2} Hz (the residual's peak) did not explain more than noise (F = {:.1}): not kept",
+                        peaks[0], t.4
+                    ));
+                    break;
+                }
+                tried = Some((peaks[..1].to_vec(), t));
+            }
+            let Some((new_f, (prob2, lay2, n_params2, out2, f_stat))) = tried else {
                 break;
             };
-            let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
-            let out2 = iterate(
-                &prob2,
-                theta2,
-                ev2,
-                dof2,
-                &cfg.lm,
-                valid(lay2.n_pairs),
-                leaving(lay2.n_pairs, lay2.n_real),
-                &cfg.progress,
-            );
-            work = work.add(out2.work);
-            let f_stat = ((out.eval.cost - out2.eval.cost) / ((n_params2 - n_params) as f64 / 2.0))
-                / (out2.eval.cost / dof2);
-            if f_stat.is_nan() || f_stat <= cfg.min_f || !out2.convergence.is_converged() {
-                messages.push(format!(
-                    "a mode added at {f_new:.2} Hz (the residual's peak) did not explain more than noise (F = {f_stat:.1}): not kept"
-                ));
-                break;
-            }
             messages.push(format!(
-                "mode added at {f_new:.2} Hz (the residual's peak; the start missed it): cost {:.4e} -> {:.4e}, F = {f_stat:.1}",
-                out.eval.cost, out2.eval.cost
+                "{} added at {} Hz (the residual's {}; the start missed {}): cost {:.4e} -> {:.4e}, F = {f_stat:.1}",
+                if new_f.len() == 1 { "mode" } else { "modes" },
+                new_f.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
+                if new_f.len() == 1 { "peak" } else { "peaks" },
+                if new_f.len() == 1 { "it" } else { "them" },
+                out.eval.cost,
+                out2.eval.cost
             ));
-            added.push(f_new);
+            added.extend(new_f);
             prob = prob2;
             lay = lay2;
             n_params = n_params2;

@@ -70,3 +70,63 @@ fn coinciding_start_poles_are_not_identifiable() {
     println!("{e}");
     assert!(e.contains("not identifiable") && e.contains("try:"), "{e}");
 }
+
+/// A start that misses several well-separated modes: the refinement adds them where the
+/// residual peaks, all in one refinement (not one refinement per mode), and ends at the
+/// noise level with every true mode.
+#[test]
+fn missed_modes_clear_of_the_others_are_added_together() {
+    for seed in [3u64, 11, 29] {
+        let truth = system(seed, 3, 2, 6, false, false);
+        let d = data_floor(&truth, 800, 1e-3, seed);
+        let mut start = perturbed(&truth, 0.002, 0.2, seed);
+        // the start misses modes 2, 4 and 6
+        for q in [5usize, 3, 1] {
+            start.modal.pairs.remove(q);
+        }
+        let fit = MlRefine::new(MlConfig::default())
+            .estimate(&d, ChainModel::from(start))
+            .unwrap();
+        let msgs = fit.messages.join("\n");
+        println!(
+            "seed {seed}: truth {:?} Hz, fit {:?} Hz, {} iterations\n{msgs}",
+            truth
+                .modal
+                .pairs
+                .iter()
+                .map(|p| p.f_hz())
+                .collect::<Vec<_>>(),
+            fit.model
+                .modal
+                .pairs
+                .iter()
+                .map(|p| p.f_hz())
+                .collect::<Vec<_>>(),
+            fit.iterations
+        );
+        assert!(fit.convergence.is_converged(), "{:?}", fit.convergence);
+        assert_eq!(fit.model.modal.pairs.len(), 6, "{msgs}");
+        for p in &truth.modal.pairs {
+            let nearest = fit
+                .model
+                .modal
+                .pairs
+                .iter()
+                .map(|q| (q.f_hz() - p.f_hz()).abs() / p.f_hz())
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                nearest < 1e-3,
+                "seed {seed}: {:.2} Hz missed\n{msgs}",
+                p.f_hz()
+            );
+        }
+        let rounds = msgs.matches(" added at ").count() - msgs.matches("not kept").count();
+        assert_eq!(
+            rounds, 1,
+            "seed {seed}: one refinement adds the three modes\n{msgs}"
+        );
+        assert!(msgs.contains("modes added at"), "{msgs}");
+        let ratio = fit.report.cost_ratio;
+        assert!(ratio < 1.1, "seed {seed}: cost / dof {ratio:.3}\n{msgs}");
+    }
+}

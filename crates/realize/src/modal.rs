@@ -203,10 +203,12 @@ impl ModalModel {
         for p in &self.pairs {
             let f1 = (s - p.pole).inv();
             let f2 = (s - p.pole.conj()).inv();
+            // r f1 + conj(r) f2 = Re r (f1 + f2) + Im r j (f1 - f2)
+            let (sum, dif) = (f1 + f2, C64::new(0.0, 1.0) * (f1 - f2));
             for j in 0..nu {
-                for i in 0..ny {
-                    let r = p.residue[(i, j)];
-                    out[j * ny + i] += r * f1 + r.conj() * f2;
+                let col = p.residue.col_as_slice(j);
+                for (o, r) in out[j * ny..(j + 1) * ny].iter_mut().zip(col) {
+                    *o += sum * r.re + dif * r.im;
                 }
             }
         }
@@ -225,13 +227,19 @@ impl ModalModel {
     /// model does not pass [`ModalModel::validate`].
     pub fn freq_response(&self, omega: &[f64]) -> Result<ResponseGrid, RealizeError> {
         self.validate()?;
-        let mut g = ResponseGrid::zeros(omega.len(), self.ny, self.nu);
-        for (k, &w) in omega.iter().enumerate() {
-            if w == 0.0 && !self.rigid.is_empty() {
-                return Err(RealizeError::AtPole { point: k, omega: w });
+        if !self.rigid.is_empty() {
+            if let Some(k) = omega.iter().position(|&w| w == 0.0) {
+                return Err(RealizeError::AtPole {
+                    point: k,
+                    omega: 0.0,
+                });
             }
-            self.eval_s_into(C64::new(0.0, w), g.line_mut(k));
         }
+        let mut g = ResponseGrid::zeros(omega.len(), self.ny, self.nu);
+        let terms = self.pairs.len() * 2 + self.real_poles.len() + self.rigid.len() + 1;
+        g.fill_lines(8 * terms * self.ny * self.nu, |k, line| {
+            self.eval_s_into(C64::new(0.0, omega[k]), line)
+        });
         Ok(g)
     }
 

@@ -304,6 +304,9 @@ pub(crate) fn scale_columns(a: &mut Mat<f64>) -> Vec<f64> {
     scale
 }
 
+/// Fewest entries per chunk of right-hand sides in [`fit_residues`].
+const RHS_CHUNK_MIN: usize = 32;
+
 /// Fits the residues, rigid-body coefficients and feedthrough of the poles `ps` to the
 /// data `g` (line after line, each `vec(G)`) at `omega` with weights `w` (same layout),
 /// through the currency's response with `factors`. Returns the model and the worst
@@ -354,26 +357,47 @@ pub fn fit_residues(
         .par_iter()
         .map(|grp| {
             let mut a = Mat::<f64>::zeros(2 * nl, nb);
-            let mut y = Mat::<f64>::zeros(2 * nl, grp.entries.len());
             for k in 0..nl {
                 let sw = grp.line_weights[k].sqrt();
                 for (q, col) in basis.iter().enumerate() {
                     a[(2 * k, q)] = col[k].re * sw;
                     a[(2 * k + 1, q)] = col[k].im * sw;
                 }
-                for (c, &e) in grp.entries.iter().enumerate() {
-                    y[(2 * k, c)] = g[k * m + e].re * sw;
-                    y[(2 * k + 1, c)] = g[k * m + e].im * sw;
-                }
             }
             let scale = scale_columns(&mut a);
             let qr = a.qr();
             let cond = condition(&qr.thin_R().to_owned());
-            let mut x = qr.solve_lstsq(&y);
-            for (q, &s) in scale.iter().enumerate() {
-                for c in 0..x.ncols() {
-                    x[(q, c)] /= s;
+            // the right-hand sides (the group's entries) in chunks on the rayon pool: with
+            // one noise level all entries are one group, and applying Q^T to thousands of
+            // columns is the cost
+            let chunk = grp
+                .entries
+                .len()
+                .div_ceil(rayon::current_num_threads().max(1));
+            let parts: Vec<Mat<f64>> = grp
+                .entries
+                .par_chunks(chunk.max(RHS_CHUNK_MIN))
+                .map(|entries| {
+                    let mut y = Mat::<f64>::zeros(2 * nl, entries.len());
+                    for k in 0..nl {
+                        let sw = grp.line_weights[k].sqrt();
+                        for (c, &e) in entries.iter().enumerate() {
+                            y[(2 * k, c)] = g[k * m + e].re * sw;
+                            y[(2 * k + 1, c)] = g[k * m + e].im * sw;
+                        }
+                    }
+                    qr.solve_lstsq(&y)
+                })
+                .collect();
+            let mut x = Mat::<f64>::zeros(nb, grp.entries.len());
+            let mut c0 = 0;
+            for part in &parts {
+                for c in 0..part.ncols() {
+                    for q in 0..nb {
+                        x[(q, c0 + c)] = part[(q, c)] / scale[q];
+                    }
                 }
+                c0 += part.ncols();
             }
             Ok((x, cond))
         })

@@ -28,7 +28,7 @@ pub fn write_outputs(
     })?;
     if let Some(dir) = report {
         let title = format!("frfit {} of {}", out.summary.command, data_path.display());
-        let input = out.report_input(&title);
+        let input = out.report_input(&title)?;
         write_report(dir, &input, &out.summary)?;
     }
     Ok(())

@@ -12,6 +12,7 @@ use additive_riv::{AdditiveModel, DelayChoice, FitData, FitterConfig, Hold, Mode
 use frf_data::cmif::{cmif, Cmif};
 use frf_data::delay::{estimate_delay, DelayEstimate};
 use frf_data::{Frf, FrfDataset, ProgressSink, Weighting};
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 use validation::distortion::{floor_noise, line_floor, LineFloor, LineFloorConfig};
 use validation::noise::{noise_level, NoiseLevel, NoiseSource};
@@ -53,8 +54,10 @@ pub struct FitContext {
     /// otherwise. The diagnosis loop judges the residual against it, see
     /// [`judging_noise`](Self::judging_noise).
     pub distortion_noise: Option<NoiseLevel>,
-    /// CMIF of the band.
-    pub cmif: Cmif,
+    /// CMIF of the band, computed on first use ([`cmif`](Self::cmif)): the CMIF start and
+    /// the report read it, a subspace start does not (at 50 x 50 entries it costs
+    /// seconds and hundreds of MB).
+    pub(super) cmif: OnceLock<Arc<Cmif>>,
     /// The weighting, resolved for the band.
     pub weighting: Weighting,
     /// The band with its weights in the estimator's layout.
@@ -133,9 +136,6 @@ impl FitContext {
         let fit_data = FitData::new(&band, &weighting).map_err(err("fit"))?;
         let omega = band.omegas();
         timings.stage("load+band", t);
-        let t = Instant::now();
-        let cmif = cmif(&band)?;
-        timings.stage("cmif", t);
         let mut declared_list = decl.sources.clone();
         if let Some(h) = cfg.hold {
             declared_list.push(format!("hold {h:?} (command line)"));
@@ -195,13 +195,23 @@ impl FitContext {
             noise,
             line_floor,
             distortion_noise,
-            cmif,
+            cmif: OnceLock::new(),
             weighting,
             fit_data,
             delay_estimate,
             omega,
             variance_dof,
         })
+    }
+
+    /// The CMIF of the band, computed on the first call and kept (the CMIF start, SK's
+    /// peaks and the report read it; a subspace start does not).
+    pub fn cmif(&self) -> Result<&Arc<Cmif>, FrfitError> {
+        if let Some(c) = self.cmif.get() {
+            return Ok(c);
+        }
+        let c = Arc::new(cmif(&self.band)?);
+        Ok(self.cmif.get_or_init(|| c))
     }
 
     /// The noise level the diagnosis loop judges residuals against: the measured (or

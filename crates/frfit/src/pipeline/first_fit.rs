@@ -175,10 +175,11 @@ pub fn chain_fit(
         peaks: fc.peaks.clone(),
         order: cfg.order,
         progress: fc.progress.clone(),
-        // the band's delay estimate and CMIF, made once in the context
+        // the band's delay estimate and CMIF, made once in the context (the CMIF only
+        // for the initialisers that read it)
         precomputed: Precomputed {
             delay: ctx.delay_estimate.clone(),
-            cmif: Some(std::sync::Arc::new(ctx.cmif.clone())),
+            cmif: None,
         },
     };
     let opts = AdditiveOptions {
@@ -196,6 +197,13 @@ pub fn chain_fit(
         &cfg.refine,
         frf_data::FrfDataset::ny(&ctx.band) * frf_data::FrfDataset::nu(&ctx.band),
     );
+    let settings = ChainSettings {
+        precomputed: Precomputed {
+            cmif: reads_cmif(&init).then(|| ctx.cmif().cloned()).transpose()?,
+            ..settings.precomputed
+        },
+        ..settings
+    };
     let result = run_chain(&ctx.band, &init, &refine, &settings, &opts)?;
     let t_numerators = std::time::Instant::now();
     let model = match result.model.native::<AdditiveModel>() {
@@ -325,4 +333,12 @@ fn repair_fit(
         ));
     }
     Ok((out, report))
+}
+
+/// True when one of the initialisers of `init` (a name, a list `a,b` or `auto`) reads
+/// the band's CMIF: the CMIF start picks its peaks, SK its order from them.
+fn reads_cmif(init: &str) -> bool {
+    init.split(',')
+        .map(str::trim)
+        .any(|n| matches!(n, "cmif" | "sk" | "auto" | ""))
 }

@@ -72,6 +72,40 @@ pub fn data(truth: &FrfModel, lines: usize, noise: f64, seed: u64) -> Frf {
     }
 }
 
+/// The response of `truth` on `lines` uniform lines in 10..1000 Hz with circular complex
+/// Gaussian noise of one standard deviation for every entry and line, `noise` times the
+/// median magnitude (a measurement's noise floor, not a fraction of each value), stated
+/// as the variance.
+pub fn data_floor(truth: &FrfModel, lines: usize, noise: f64, seed: u64) -> Frf {
+    let clean = data(truth, lines, 0.0, seed);
+    let mut mags: Vec<f64> = clean.values_vec().iter().map(|v| v.norm()).collect();
+    mags.sort_by(f64::total_cmp);
+    let s = noise * mags[mags.len() / 2];
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xf100_4000);
+    let vals: Vec<_> = clean
+        .values_vec()
+        .iter()
+        .map(|v| {
+            let (a, b): (f64, f64) = (
+                StandardNormal.sample(&mut rng),
+                StandardNormal.sample(&mut rng),
+            );
+            v + frf_data::C64::new(a, b) * (s / 2f64.sqrt())
+        })
+        .collect();
+    let n = vals.len();
+    Frf::new(
+        clean.freq_hz_slice().to_vec(),
+        truth.ny(),
+        truth.nu(),
+        vals,
+        None,
+    )
+    .unwrap()
+    .with_variance(Some(vec![s * s; n]))
+    .unwrap()
+}
+
 /// `truth` with its poles moved (frequencies by up to `df` relative, damping by up to
 /// `dz` relative) and its residues halved: a start for a refiner.
 pub fn perturbed(truth: &FrfModel, df: f64, dz: f64, seed: u64) -> FrfModel {
