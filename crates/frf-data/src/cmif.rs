@@ -269,16 +269,24 @@ pub enum SvdMethod {
 ///
 /// Errors: no lines; a non-finite value (only possible for a custom [`FrfDataset`], an
 /// [`crate::Frf`] is checked when built); an SVD that does not converge.
-pub fn cmif(data: &(impl FrfDataset + ?Sized)) -> Result<Cmif, FrfError> {
+pub fn cmif(data: &(impl FrfDataset + ?Sized + Sync)) -> Result<Cmif, FrfError> {
     cmif_with(data, SvdMethod::Auto)
 }
 
 /// The largest `min(ny, nu)` for which [`SvdMethod::Auto`] uses Jacobi.
 const JACOBI_MAX_RANK: usize = 8;
+/// Lines x entries x singular values above which the CMIF's lines are decomposed in
+/// blocks on the rayon pool (the 4 x 13 wafer stage, 4000 lines: 8e5, one block).
+const PARALLEL_WORK: usize = 20_000_000;
+/// Lines per block on the rayon pool.
+const BLOCK_LINES: usize = 128;
 
 /// [`cmif`] with a choice of SVD algorithm (both give the same values to rounding; a
 /// test checks it).
-pub fn cmif_with(data: &(impl FrfDataset + ?Sized), method: SvdMethod) -> Result<Cmif, FrfError> {
+pub fn cmif_with(
+    data: &(impl FrfDataset + ?Sized + Sync),
+    method: SvdMethod,
+) -> Result<Cmif, FrfError> {
     let (n, ny, nu) = (data.n_lines(), data.ny(), data.nu());
     if n == 0 {
         return Err(FrfError::InvalidData {
@@ -299,37 +307,61 @@ pub fn cmif_with(data: &(impl FrfDataset + ?Sized), method: SvdMethod) -> Result
         SvdMethod::Jacobi => true,
         SvdMethod::Faer => false,
     };
-    let mut faer_svd = FaerSvd::new(ny, nu);
-    let mut jac = JacobiSvd::new(ny, nu);
-    let mut line = vec![C64::new(0.0, 0.0); m];
-    let mut var = vec![0.0; m];
     let mut freq_hz = Vec::with_capacity(n);
-    let mut sv2 = Vec::with_capacity(n);
+    let mut sv2: Vec<Vec<f64>> = vec![Vec::new(); n];
     let mut u = vec![C64::new(0.0, 0.0); n * r * ny];
     let mut v = vec![C64::new(0.0, 0.0); n * r * nu];
+    // the lines of one block in order, with one SVD workspace (the Jacobi SVD starts
+    // each line from the previous line's rotations)
+    let run_block = |k0: usize, uc: &mut [C64], vc: &mut [C64], sc: &mut [Vec<f64>]| {
+        let mut faer_svd = FaerSvd::new(ny, nu);
+        let mut jac = JacobiSvd::new(ny, nu);
+        let mut line = vec![C64::new(0.0, 0.0); m];
+        let mut s = vec![0.0; r];
+        for (i, sv) in sc.iter_mut().enumerate() {
+            let k = k0 + i;
+            let f = data.freq_hz(k);
+            data.line_into(k, &mut line);
+            if !f.is_finite() || line.iter().any(|z| !(z.re.is_finite() && z.im.is_finite())) {
+                return Err(FrfError::InvalidData {
+                    why: format!("non-finite frequency or value at line {k} ({f} Hz)"),
+                });
+            }
+            let uk = &mut uc[i * r * ny..(i + 1) * r * ny];
+            let vk = &mut vc[i * r * nu..(i + 1) * r * nu];
+            let done = use_jacobi && jac.run(&line, &mut s, uk, vk);
+            if !done {
+                faer_svd
+                    .run(&line, &mut s, uk, vk)
+                    .map_err(|e| FrfError::Numerical {
+                        what: "CMIF singular value decomposition".into(),
+                        why: format!("{e} at line {k} ({f} Hz)"),
+                    })?;
+            }
+            *sv = s.iter().map(|x| x * x).collect();
+        }
+        Ok(())
+    };
+    // blocks of lines on the rayon pool when the decompositions are many and large
+    // (hundreds of entries: seconds on one thread); one block otherwise
+    let block = if n * m * r >= PARALLEL_WORK {
+        BLOCK_LINES
+    } else {
+        n
+    };
+    {
+        use rayon::prelude::*;
+        u.par_chunks_mut(block * r * ny)
+            .zip(v.par_chunks_mut(block * r * nu))
+            .zip(sv2.par_chunks_mut(block))
+            .enumerate()
+            .map(|(b, ((uc, vc), sc))| run_block(b * block, uc, vc, sc))
+            .collect::<Result<(), FrfError>>()?;
+    }
+    let mut var = vec![0.0; m];
     let mut all_var = data.has_variance().then(|| Vec::with_capacity(n * m));
-    let mut s = vec![0.0; r];
     for k in 0..n {
-        let f = data.freq_hz(k);
-        data.line_into(k, &mut line);
-        if !f.is_finite() || line.iter().any(|z| !(z.re.is_finite() && z.im.is_finite())) {
-            return Err(FrfError::InvalidData {
-                why: format!("non-finite frequency or value at line {k} ({f} Hz)"),
-            });
-        }
-        let uk = &mut u[k * r * ny..(k + 1) * r * ny];
-        let vk = &mut v[k * r * nu..(k + 1) * r * nu];
-        let done = use_jacobi && jac.run(&line, &mut s, uk, vk);
-        if !done {
-            faer_svd
-                .run(&line, &mut s, uk, vk)
-                .map_err(|e| FrfError::Numerical {
-                    what: "CMIF singular value decomposition".into(),
-                    why: format!("{e} at line {k} ({f} Hz)"),
-                })?;
-        }
-        freq_hz.push(f);
-        sv2.push(s.iter().map(|x| x * x).collect());
+        freq_hz.push(data.freq_hz(k));
         if let Some(av) = &mut all_var {
             data.variance_line_into(k, &mut var);
             av.extend(
@@ -1187,6 +1219,40 @@ mod tests {
             }
         }
         Frf::new(f, ny, nu, vals, None).unwrap()
+    }
+
+    /// A CMIF large enough to be decomposed in blocks on the rayon pool equals, line for
+    /// line, the CMIF of each line on its own (one block, one thread), and keeps the
+    /// lines' order and frequencies.
+    #[test]
+    fn blocks_on_the_pool_match_line_by_line() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (n, ny, nu) = (2600, 20, 20);
+        assert!(n * ny * nu * ny.min(nu) >= PARALLEL_WORK);
+        let d = random_frf(&mut rng, n, ny, nu);
+        let all = cmif(&d).unwrap();
+        assert_eq!(all.freq_hz, d.freq_hz_slice());
+        for k in (0..n).step_by(97).chain([n - 1]) {
+            let one = Frf::new(
+                vec![d.freq_hz(k)],
+                ny,
+                nu,
+                (0..nu)
+                    .flat_map(|q| (0..ny).map(move |p| (p, q)))
+                    .map(|(p, q)| d.value(k, p, q))
+                    .collect(),
+                None,
+            )
+            .unwrap();
+            let c = cmif(&one).unwrap();
+            for i in 0..ny.min(nu) {
+                let (x, y) = (all.sv2[k][i], c.sv2[0][i]);
+                assert!(
+                    (x - y).abs() <= 1e-12 * c.sv2[0][0],
+                    "line {k} sv {i}: {x} vs {y}"
+                );
+            }
+        }
     }
 
     #[test]

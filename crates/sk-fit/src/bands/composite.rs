@@ -414,7 +414,7 @@ impl MultiBandSk {
     }
 
     /// The band plan: cut-offs, lines, peaks and tiered weights of each band.
-    fn plan<D: FrfDataset + ?Sized>(
+    fn plan<D: FrfDataset + ?Sized + Sync>(
         &self,
         data: &D,
         lines: &Lines,
