@@ -109,35 +109,48 @@ pub fn fit_b_d(
         for s in scale.iter_mut() {
             *s = if *s > 0.0 { s.sqrt() } else { 1.0 };
         }
-        let mut r = Mat::<f64>::zeros(nc + ng, nc + ng);
-        let mut block = Mat::<f64>::zeros(2 * blk * p, nc + ng);
-        let mut k0 = 0;
-        while k0 < nl {
-            let k1 = (k0 + blk).min(nl);
-            for k in k0..k1 {
-                for o in 0..p {
-                    let sw = lw(k, o).sqrt();
-                    let (re, im) = (2 * ((k - k0) * p + o), 2 * ((k - k0) * p + o) + 1);
-                    for l in 0..n {
-                        let f = phi(k, o, l) * (sw / scale[l]);
-                        block[(re, l)] = f.re;
-                        block[(im, l)] = f.im;
-                    }
-                    for q in 0..p {
-                        let v = if q == o { sw / scale[n + o] } else { 0.0 };
-                        block[(re, n + q)] = v;
-                        block[(im, n + q)] = 0.0;
-                    }
-                    for (c, &j) in grp.entries.iter().enumerate() {
-                        let h = d.h[k * p * nu + j * p + o] * sw;
-                        block[(re, nc + c)] = h.re;
-                        block[(im, nc + c)] = h.im;
+        // the triangle of the lines k_lo..k_hi, absorbed block after block
+        let triangle = |k_lo: usize, k_hi: usize| -> Result<Mat<f64>, SubspaceError> {
+            let mut r = Mat::<f64>::zeros(nc + ng, nc + ng);
+            let mut block = Mat::<f64>::zeros(2 * blk * p, nc + ng);
+            let mut k0 = k_lo;
+            while k0 < k_hi {
+                let k1 = (k0 + blk).min(k_hi);
+                for k in k0..k1 {
+                    for o in 0..p {
+                        let sw = lw(k, o).sqrt();
+                        let (re, im) = (2 * ((k - k0) * p + o), 2 * ((k - k0) * p + o) + 1);
+                        for l in 0..n {
+                            let f = phi(k, o, l) * (sw / scale[l]);
+                            block[(re, l)] = f.re;
+                            block[(im, l)] = f.im;
+                        }
+                        for q in 0..p {
+                            let v = if q == o { sw / scale[n + o] } else { 0.0 };
+                            block[(re, n + q)] = v;
+                            block[(im, n + q)] = 0.0;
+                        }
+                        for (c, &j) in grp.entries.iter().enumerate() {
+                            let h = d.h[k * p * nu + j * p + o] * sw;
+                            block[(re, nc + c)] = h.re;
+                            block[(im, nc + c)] = h.im;
+                        }
                     }
                 }
+                r = crate::projection::absorb(&r, &block, 2 * p * (k1 - k0))?;
+                k0 = k1;
             }
-            r = crate::projection::absorb(&r, &block, 2 * p * (k1 - k0))?;
-            k0 = k1;
-        }
+            Ok(r)
+        };
+        // the two halves of the band on the two threads, their triangles then combined
+        // (the triangle of all lines, to rounding): seconds at hundreds of states
+        let r = if nl >= 4 * blk {
+            let mid = nl / 2;
+            let (r1, r2) = rayon::join(|| triangle(0, mid), || triangle(mid, nl));
+            crate::projection::absorb(&r1?, &r2?, nc + ng)?
+        } else {
+            triangle(0, nl)?
+        };
         let rr = Mat::from_fn(nc, nc, |a, b| r[(a, b)]);
         worst = worst.max(condition(&rr));
         for (c, &j) in grp.entries.iter().enumerate() {
