@@ -374,98 +374,89 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
     } = parse_header(name, header_line, header_text)?;
     check_announced_dims(name, header_line, &metadata, ny, nu)?;
     let m = ny * nu;
-    let n_cols = targets.len();
 
-    // Data lines.
-    let mut freqs: Vec<f64> = Vec::new();
-    let mut values: Vec<C64> = Vec::new();
-    let mut variance: Vec<f64> = Vec::new();
-    let mut dc_allowed: Option<bool> = None;
-    let zero = C64::new(0.0, 0.0);
+    // Data lines: found in order, parsed in blocks on the rayon pool (a 50 x 50 file
+    // with variances holds hundreds of MB of numbers), then checked in order, so that
+    // the first problem of the file is the one reported, as a line-by-line reader would.
+    let mut items: Vec<(usize, &str, bool)> = Vec::new();
     for (idx, raw) in lines {
-        let line_no = idx + 1;
         let line = raw.strip_suffix('\r').unwrap_or(raw);
         if line.bytes().all(|b| b.is_ascii_whitespace()) {
             continue;
         }
-        if line.trim_start().starts_with('#') {
+        let comment = line.trim_start().starts_with('#');
+        items.push((idx + 1, line, comment));
+    }
+    let data_lines: Vec<(usize, &str)> = items
+        .iter()
+        .filter(|(_, _, c)| !c)
+        .map(|&(no, l, _)| (no, l))
+        .collect();
+    let n_data = data_lines.len();
+    let zero = C64::new(0.0, 0.0);
+    let mut values: Vec<C64> = vec![zero; n_data * m];
+    let mut variance: Vec<f64> = vec![0.0; if has_var { n_data * m } else { 0 }];
+    let mut parsed_freqs: Vec<f64> = vec![f64::NAN; n_data];
+    let ctx = LineParser {
+        name,
+        names: &names,
+        targets: &targets,
+        m,
+    };
+    let first_error = {
+        use rayon::prelude::*;
+        let block = PARSE_BLOCK_LINES;
+        let run = |(b, (vals, fr)): (usize, (&mut [C64], &mut [f64])), var: &mut [f64]| {
+            for (i, f) in fr.iter_mut().enumerate() {
+                let k = b * block + i;
+                let (line_no, line) = data_lines[k];
+                let var_row = if has_var {
+                    &mut var[i * m..(i + 1) * m]
+                } else {
+                    &mut []
+                };
+                match ctx.parse(line_no, line, &mut vals[i * m..(i + 1) * m], var_row) {
+                    Ok(x) => *f = x,
+                    Err(e) => return Some((k, e)),
+                }
+            }
+            None
+        };
+        let errors: Vec<(usize, FrfError)> = if has_var {
+            values
+                .par_chunks_mut(block * m.max(1))
+                .zip(parsed_freqs.par_chunks_mut(block))
+                .zip(variance.par_chunks_mut(block * m.max(1)))
+                .enumerate()
+                .filter_map(|(b, ((vals, fr), var))| run((b, (vals, fr)), var))
+                .collect()
+        } else {
+            values
+                .par_chunks_mut(block * m.max(1))
+                .zip(parsed_freqs.par_chunks_mut(block))
+                .enumerate()
+                .filter_map(|(b, (vals, fr))| run((b, (vals, fr)), &mut []))
+                .collect()
+        };
+        errors.into_iter().min_by_key(|(k, _)| *k)
+    };
+    let mut first_error = first_error;
+    let mut freqs: Vec<f64> = Vec::with_capacity(n_data);
+    let mut dc_allowed: Option<bool> = None;
+    for &(line_no, line, comment) in &items {
+        if comment {
             let c = comment_text(line);
             parse_comment_metadata(c, &mut metadata);
             comments.push(c.to_string());
             continue;
         }
-        let err = |c: usize, problem, detail: String| {
-            FrfError::format(name, line_no, Some(names[c]), problem, detail)
-        };
-        let base = values.len();
-        values.resize(base + m, zero);
-        if has_var {
-            variance.resize(base + m, 0.0);
-        }
-        let row_values = &mut values[base..];
-        let mut fields = line.split(',');
-        let mut freq = f64::NAN;
-        for (c, &target) in targets.iter().enumerate() {
-            let Some(field) = fields.next() else {
-                return Err(err(
-                    c,
-                    FormatProblem::FieldCount,
-                    format!(
-                        "the line has {c} fields, the header {n_cols}: no value for column `{}`",
-                        names[c]
-                    ),
-                ));
-            };
-            let Some(x) = parse_number(field) else {
-                let detail = if field.trim().is_empty() {
-                    "empty field where a number is expected".to_string()
-                } else {
-                    format!("`{}` is not a number", shown(field))
-                };
-                return Err(err(c, FormatProblem::NotANumber, detail));
-            };
-            if !x.is_finite() {
-                let what = if x.is_nan() {
-                    "NaN (not a number)"
-                } else {
-                    "infinite"
-                };
-                return Err(err(
-                    c,
-                    FormatProblem::NonFinite,
-                    format!(
-                        "`{}` is {what}; every value must be a finite number",
-                        shown(field)
-                    ),
-                ));
-            }
-            match target {
-                Target::Freq => freq = x,
-                Target::Re(e) => row_values[e].re = x,
-                Target::Im(e) => row_values[e].im = x,
-                Target::Var(e) => {
-                    if x < 0.0 {
-                        return Err(err(
-                            c,
-                            FormatProblem::NegativeVariance,
-                            format!("variance {} is negative", shown(field)),
-                        ));
-                    }
-                    variance[base + e] = x;
-                }
+        let k = freqs.len();
+        if first_error.as_ref().is_some_and(|(i, _)| *i == k) {
+            if let Some((_, e)) = first_error.take() {
+                return Err(e);
             }
         }
-        if fields.next().is_some() {
-            let n_fields = n_cols + 1 + fields.count();
-            let col = format!("field {}", n_cols + 1);
-            return Err(FrfError::format(
-                name,
-                line_no,
-                Some(&col),
-                FormatProblem::FieldCount,
-                format!("the line has {n_fields} fields, the header {n_cols}"),
-            ));
-        }
+        let freq = parsed_freqs[k];
         let freq_err = |problem, detail: String| {
             FrfError::format(name, line_no, Some("freq_hz"), problem, detail)
         };
@@ -517,6 +508,100 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
     frf.comments = comments;
     frf.source = Some(name.to_string());
     Ok(frf)
+}
+
+/// Lines per block of the parallel parse of [`parse_frf_csv`].
+const PARSE_BLOCK_LINES: usize = 64;
+
+/// What the parse of one data line needs from the header.
+struct LineParser<'a> {
+    name: &'a str,
+    names: &'a [&'a str],
+    targets: &'a [Target],
+    m: usize,
+}
+
+impl LineParser<'_> {
+    /// Parses data line `line_no` into its entries' values (and variances, when the
+    /// header has them) and returns its frequency; the first bad field is an error
+    /// naming the file, line and column.
+    fn parse(
+        &self,
+        line_no: usize,
+        line: &str,
+        row_values: &mut [C64],
+        row_var: &mut [f64],
+    ) -> Result<f64, FrfError> {
+        let (names, n_cols) = (self.names, self.targets.len());
+        debug_assert_eq!(row_values.len(), self.m);
+        let err = |c: usize, problem, detail: String| {
+            FrfError::format(self.name, line_no, Some(names[c]), problem, detail)
+        };
+        let mut fields = line.split(',');
+        let mut freq = f64::NAN;
+        for (c, &target) in self.targets.iter().enumerate() {
+            let Some(field) = fields.next() else {
+                return Err(err(
+                    c,
+                    FormatProblem::FieldCount,
+                    format!(
+                        "the line has {c} fields, the header {n_cols}: no value for column `{}`",
+                        names[c]
+                    ),
+                ));
+            };
+            let Some(x) = parse_number(field) else {
+                let detail = if field.trim().is_empty() {
+                    "empty field where a number is expected".to_string()
+                } else {
+                    format!("`{}` is not a number", shown(field))
+                };
+                return Err(err(c, FormatProblem::NotANumber, detail));
+            };
+            if !x.is_finite() {
+                let what = if x.is_nan() {
+                    "NaN (not a number)"
+                } else {
+                    "infinite"
+                };
+                return Err(err(
+                    c,
+                    FormatProblem::NonFinite,
+                    format!(
+                        "`{}` is {what}; every value must be a finite number",
+                        shown(field)
+                    ),
+                ));
+            }
+            match target {
+                Target::Freq => freq = x,
+                Target::Re(e) => row_values[e].re = x,
+                Target::Im(e) => row_values[e].im = x,
+                Target::Var(e) => {
+                    if x < 0.0 {
+                        return Err(err(
+                            c,
+                            FormatProblem::NegativeVariance,
+                            format!("variance {} is negative", shown(field)),
+                        ));
+                    }
+                    row_var[e] = x;
+                }
+            }
+        }
+        if fields.next().is_some() {
+            let n_fields = n_cols + 1 + fields.count();
+            let col = format!("field {}", n_cols + 1);
+            return Err(FrfError::format(
+                self.name,
+                line_no,
+                Some(&col),
+                FormatProblem::FieldCount,
+                format!("the line has {n_fields} fields, the header {n_cols}"),
+            ));
+        }
+        Ok(freq)
+    }
 }
 
 /// True for comment lines the writer regenerates itself: a `units: ...` line, or only
@@ -627,6 +712,74 @@ pub fn frf_csv_string<D: FrfDataset + ?Sized>(data: &D, comments: &[String]) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A file of many blocks of lines (parsed in parallel) with two problems reports the
+    /// first in the file, whichever kind each is, and a comment between data lines still
+    /// applies to the lines after it.
+    #[test]
+    fn the_first_problem_of_a_long_file_is_reported() {
+        let file = |bad: &[(usize, &str)], dc_comment_at: Option<usize>| {
+            let mut t = String::from("freq_hz,G1_1_re,G1_1_im,G1_1_var\n");
+            for k in 0..700usize {
+                if dc_comment_at == Some(k) {
+                    t.push_str("# dc=allowed\n");
+                }
+                match bad.iter().find(|(line, _)| *line == k) {
+                    Some((_, text)) => t.push_str(text),
+                    None => t.push_str(&format!("{},1.5,-0.25,1e-6", 1.0 + k as f64)),
+                }
+                t.push('\n');
+            }
+            t
+        };
+        let line_of = |e: FrfError| match e {
+            FrfError::Format {
+                line,
+                column,
+                problem,
+                ..
+            } => (line, column, problem),
+            other => panic!("{other}"),
+        };
+        // data line k is file line k + 2 (the header is line 1)
+        let e = parse_frf_csv(
+            &file(&[(100, "50,1,1,1e-6"), (450, "451,NaN,1,1e-6")], None),
+            "f",
+        )
+        .unwrap_err();
+        assert_eq!(
+            line_of(e),
+            (102, Some("freq_hz".into()), FormatProblem::NotIncreasing)
+        );
+        let e = parse_frf_csv(
+            &file(&[(300, "301,1,x,1e-6"), (600, "10,1,1,1e-6")], None),
+            "f",
+        )
+        .unwrap_err();
+        assert_eq!(
+            line_of(e),
+            (302, Some("G1_1_im".into()), FormatProblem::NotANumber)
+        );
+        let e =
+            parse_frf_csv(&file(&[(640, "641,1,1,-1"), (650, "651,1,1")], None), "f").unwrap_err();
+        assert_eq!(
+            line_of(e),
+            (
+                642,
+                Some("G1_1_var".into()),
+                FormatProblem::NegativeVariance
+            )
+        );
+        let ok = parse_frf_csv(&file(&[], None), "f").unwrap();
+        assert_eq!(ok.n_lines(), 700);
+        assert_eq!(ok.freq_hz_slice()[699], 700.0);
+        assert_eq!(ok.value(699, 0, 0), C64::new(1.5, -0.25));
+        // a 0 Hz first line needs the comment before it
+        let dc = |t: String| t.replacen("\n1,1.5", "\n0,1.5", 1);
+        assert!(parse_frf_csv(&dc(file(&[], None)), "f").is_err());
+        let with = parse_frf_csv(&dc(file(&[], Some(0))), "f").unwrap();
+        assert_eq!(with.freq_hz_slice()[0], 0.0);
+    }
 
     #[test]
     fn entry_column_names() {
