@@ -418,6 +418,8 @@ fn round(
         trials.extend(run(modes.into_iter().map(Job::Candidate).collect()));
         trials = finish(trials);
     }
+    // a factor's zeros must be significant beside the same factor without them
+    trial::test_zeros(&mut trials, fd, cfg, &current);
     st.n_tests = n_tests.into_inner();
     (!trials.is_empty()).then_some(trials)
 }
