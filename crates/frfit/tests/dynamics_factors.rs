@@ -152,6 +152,7 @@ fn an_actuator_lead_lag_is_an_input_factor_with_a_zero() {
     let pole = p["poles"][0]["f_hz"].as_f64().unwrap();
     let zero = p["zeros"][0]["f_hz"].as_f64().unwrap();
     println!("lead-lag found: zero {zero:.3} Hz (made {f_z}), pole {pole:.3} Hz (made {f_p})");
+    println!("evidence: {}", steps[0].evidence);
     assert!(
         (zero / f_z - 1.0).abs() < 0.02,
         "zero at {zero:.1} Hz, made at {f_z}"

@@ -1084,9 +1084,11 @@ fn propose_dynamics(
     }
     let f_top = band.1;
     for (all_pole, ev) in twins {
+        let t_screen = std::time::Instant::now();
         let Some((twin, base, screened)) = with_numerator(model, fd, &all_pole, f_top) else {
             continue;
         };
+        let t_screen = t_screen.elapsed().as_secs_f64();
         if seen(twin.effect(), &twin.key()) {
             continue;
         }
@@ -1094,6 +1096,10 @@ fn propose_dynamics(
             continue;
         };
         let (zf, zz) = start.zeros.unwrap_or((f64::NAN, f64::NAN));
+        // a screened zero on its pole cancels the factor: nothing for a refit to test
+        if screened >= base || (start.order == 1 && (zf / start.f_hz).ln().abs() < 0.05) {
+            continue;
+        }
         let shape = if start.order == 1 {
             format!("zero at {zf:.1} Hz, pole at {:.1} Hz", start.f_hz)
         } else {
@@ -1103,7 +1109,7 @@ fn propose_dynamics(
             )
         };
         let ev = format!(
-            "{ev}; with a numerator of its order (a {}): {shape}, screened by the cost after the numerator fit ({screened:.4e}, the all-pole start {base:.4e}); its zeros must be significant beside the all-pole factor",
+            "{ev}; with a numerator of its order (a {}): {shape}, screened by the cost after the numerator fit ({screened:.4e}, the all-pole start {base:.4e}; {t_screen:.1} s); its zeros must be significant beside the all-pole factor",
             if start.order == 1 {
                 "lead-lag"
             } else {
@@ -1150,7 +1156,7 @@ fn with_numerator(
     };
     let base = cost(all_pole);
     let (lo, hi) = NUMERATOR_GRID;
-    let n = 10;
+    let n = 8;
     let step = (hi / lo).ln() / (n - 1) as f64;
     let freqs: Vec<f64> = (0..n)
         .map(|a| f_top * lo * (step * a as f64).exp())
