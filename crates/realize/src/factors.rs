@@ -157,7 +157,7 @@ impl DynamicsFactor {
     /// band the factor starts as nearly the all-pole one, and a fit frees them.
     /// An all-pole factor of order 1 or 2 only; `None` otherwise.
     pub fn with_zeros(&self, zero_hz: f64, zero_zeta: f64) -> Option<Self> {
-        if !self.num.is_empty() || !(zero_hz.is_finite() && zero_hz > 0.0) {
+        if !(self.num.is_empty() && zero_hz.is_finite() && zero_hz > 0.0) {
             return None;
         }
         let r = self.scale / (TAU * zero_hz);
