@@ -107,6 +107,10 @@ pub struct FactorStart {
     /// a numerator of the denominator's order (a lead-lag, or a second-order rational
     /// with an anti-resonance), [`DynamicsFactor::with_zeros`]; `None`: an all-pole factor.
     pub zeros: Option<(f64, f64)>,
+    /// The model's own all-pole dynamics factor (index in its `dynamics`) that this
+    /// factor, with the same poles to start and zeros added, takes the place of: the
+    /// accepted factor tried again with a numerator ([`propose_dynamics`]).
+    pub replaces_factor: Option<usize>,
 }
 
 impl FactorStart {
@@ -122,6 +126,7 @@ impl FactorStart {
                 replaces: Vec::new(),
                 delay_s: None,
                 zeros: None,
+                replaces_factor: None,
             }
         } else {
             let f_hz = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
@@ -136,6 +141,7 @@ impl FactorStart {
                 replaces: Vec::new(),
                 delay_s: None,
                 zeros: None,
+                replaces_factor: None,
             }
         }
     }
@@ -214,8 +220,12 @@ impl Candidate {
                     start.replaces.iter().map(|i| format!(":m{i}")).collect();
                 let traded = if start.delay_s.is_some() { ":d" } else { "" };
                 let zeros = if start.zeros.is_some() { ":z" } else { "" };
+                let own = start
+                    .replaces_factor
+                    .map(|k| format!(":f{k}"))
+                    .unwrap_or_default();
                 format!(
-                    "{which}:{}{}{traded}{zeros}",
+                    "{which}:{}{}{traded}{own}{zeros}",
                     start.order,
                     replaced.concat()
                 )
@@ -325,6 +335,14 @@ fn dynamics(
         }
     };
     let mut m = model.clone();
+    if let Some(k) = start.replaces_factor {
+        if k >= m.dynamics.len() {
+            return Err(RivError::Structure(format!(
+                "dynamics factor {k} that the candidate would replace is not in the model"
+            )));
+        }
+        m.dynamics.remove(k);
+    }
     let mut gone = start.replaces.clone();
     gone.sort_unstable();
     gone.dedup();
@@ -437,6 +455,7 @@ fn local_modes(
                 replaces: vec![sub],
                 delay_s: None,
                 zeros: None,
+                replaces_factor: None,
             },
         ));
     }
@@ -526,6 +545,7 @@ fn above_band(
             replaces: Vec::new(),
             delay_s: None,
             zeros: None,
+            replaces_factor: None,
         },
     ))
 }
@@ -655,6 +675,7 @@ fn traded_common_lag(
                 replaces: Vec::new(),
                 delay_s: Some(d - 1.0 / (std::f64::consts::TAU * f_hz)),
                 zeros: None,
+                replaces_factor: None,
             },
             base,
             c,
@@ -1081,6 +1102,46 @@ fn propose_dynamics(
         if !seen(Effect::InputDynamics, &candidate.key()) {
             push(candidate, ev);
         }
+    }
+    // the model's own all-pole factors (accepted in an earlier round), tried again with
+    // a numerator of their order in their place
+    for (k, d) in model.dynamics.iter().enumerate() {
+        if !d.num.is_empty() || !(1..=2).contains(&d.den.len()) {
+            continue;
+        }
+        let Some(p) = d.poles().into_iter().max_by(|a, b| a.im.total_cmp(&b.im)) else {
+            continue;
+        };
+        let start = FactorStart {
+            order: d.den.len(),
+            f_hz: p.norm() / std::f64::consts::TAU,
+            zeta: if d.den.len() == 2 {
+                -p.re / p.norm()
+            } else {
+                1.0
+            },
+            replaces: Vec::new(),
+            delay_s: None,
+            zeros: None,
+            replaces_factor: Some(k),
+        };
+        // an overdamped pair (two real poles) has no (frequency, damping) start of the
+        // same factor
+        if start.order == 2 && !(p.im > 0.0 && start.zeta > 0.0) {
+            continue;
+        }
+        let candidate = match d.target {
+            FactorTarget::Input(j) => one_factor(true, j, start),
+            FactorTarget::Output(i) => one_factor(false, i, start),
+            FactorTarget::All => Candidate::InputDynamics {
+                inputs: (1..=model.nu()).collect(),
+                start,
+            },
+        };
+        twins.push((
+            candidate,
+            format!("the model's factor {} ({:?}, all-pole)", k + 1, d.target),
+        ));
     }
     let f_top = band.1;
     for (all_pole, ev) in twins {
