@@ -499,6 +499,24 @@ pub fn test_zeros(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConfig, curr
             .dynamics
             .last()
             .is_some_and(|d| d.is_non_minimum_phase());
+        // a zero the refit moved beyond the screening grid's top (4 times the top line)
+        // does not show in the band: what it gained is the misfit of the rest of the
+        // model (on the reference plate with an output lag and four missed modes, a
+        // zero at 43 kHz moved the lag from 900 to 933 Hz)
+        let f_far = 4.0 * fd.band_hz.1;
+        let far_zero = t.model.dynamics.last().is_some_and(|d| {
+            d.zeros()
+                .iter()
+                .any(|z| z.norm() / std::f64::consts::TAU > f_far)
+        });
+        if far_zero {
+            t.evidence = format!(
+                "{}; its refit put a zero above {f_far:.0} Hz, beyond what the band shows; not accepted",
+                t.evidence
+            );
+            t.f = t.f.min(t.f_crit * (1.0 - 1e-12));
+            continue;
+        }
         if c.is_common_factor() && rhp_zero {
             t.evidence = format!(
                 "{}; its refit put a zero in the right half-plane on every entry: the Pade form of a delay, which the delay explains with one parameter; not accepted",
