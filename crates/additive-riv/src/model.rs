@@ -558,7 +558,8 @@ impl AdditiveModel {
         }
     }
 
-    /// Adds a dynamics factor (checked: target in range, finite coefficients, scale > 0).
+    /// Adds a dynamics factor (checked: target in range, finite coefficients, a
+    /// numerator of at most the denominator's order (a proper factor), scale > 0).
     pub fn push_dynamics(&mut self, f: DynamicsFactor) -> Result<usize, RivError> {
         match f.target {
             FactorTarget::Input(j) if j >= self.nu => {
@@ -577,10 +578,17 @@ impl AdditiveModel {
             }
             _ => {}
         }
-        if f.den.is_empty() || f.den.iter().any(|a| !a.is_finite()) {
+        if f.den.is_empty() || f.den.iter().chain(&f.num).any(|a| !a.is_finite()) {
             return Err(RivError::Structure(
                 "a dynamics factor needs finite coefficients".into(),
             ));
+        }
+        if f.num.len() > f.den.len() {
+            return Err(RivError::Structure(format!(
+                "a dynamics factor needs a numerator of at most its denominator's order (got {} over {}): an improper factor grows without bound",
+                f.num.len(),
+                f.den.len()
+            )));
         }
         check_scale(f.scale)?;
         self.dynamics.push(f);
@@ -1127,11 +1135,16 @@ impl ModelStructure for AdditiveModel {
             .map(|i| self.n_params_of(i))
             .sum::<usize>()
             + usize::from(self.factor.fit_delay)
-            + self.dynamics.iter().map(|d| d.den.len()).sum::<usize>()
+            + self
+                .dynamics
+                .iter()
+                .map(|d| d.den.len() + d.num.len())
+                .sum::<usize>()
     }
     /// Per submodel the paper's form (6) `[a_1..a_n, vec(B_0), ..]` (unscaled), in
-    /// submodel order, then the delay (seconds) when it is a free parameter, then the
-    /// coefficients `a_r` (unscaled, `s^r` units) of each dynamics factor.
+    /// submodel order, then the delay (seconds) when it is a free parameter, then per
+    /// dynamics factor its denominator coefficients `a_r` and numerator coefficients
+    /// `b_r` (unscaled, `s^r` units).
     fn params(&self) -> Vec<f64> {
         let mut p = Vec::with_capacity(self.n_params());
         for i in 0..self.submodels.len() {
@@ -1141,8 +1154,10 @@ impl ModelStructure for AdditiveModel {
             p.push(self.factor.delay_s);
         }
         for d in &self.dynamics {
-            for (r, a) in d.den.iter().enumerate() {
-                p.push(a / d.scale.powi(r as i32 + 1));
+            for c in [&d.den, &d.num] {
+                for (r, a) in c.iter().enumerate() {
+                    p.push(a / d.scale.powi(r as i32 + 1));
+                }
             }
         }
         p
@@ -1175,9 +1190,12 @@ impl ModelStructure for AdditiveModel {
             off += 1;
         }
         for d in &mut self.dynamics {
-            for (r, a) in d.den.iter_mut().enumerate() {
-                *a = params[off] * d.scale.powi(r as i32 + 1);
-                off += 1;
+            let scale = d.scale;
+            for c in [&mut d.den, &mut d.num] {
+                for (r, a) in c.iter_mut().enumerate() {
+                    *a = params[off] * scale.powi(r as i32 + 1);
+                    off += 1;
+                }
             }
         }
         Ok(())

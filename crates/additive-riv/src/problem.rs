@@ -7,7 +7,8 @@
 //! coefficients (and a fitted delay) are shared by all entries. `eta[e * n_num + j]` is
 //! numerator coefficient `j` (submodel by submodel, power by power) of entry `e`;
 //! `shared` holds the scaled denominator coefficients, submodel by submodel, then the
-//! delay when it is fitted.
+//! delay when it is fitted, then per dynamics factor its denominator and numerator
+//! coefficients (`a~_1 .. a~_n`, `b~_1 .. b~_m` of `B(x) / A(x)`).
 
 use crate::{AdditiveModel, RivError};
 use frf_data::{FrfDataset, Weighting, C64};
@@ -150,7 +151,8 @@ pub struct Layout {
     pub n_den: usize,
     /// Whether the delay follows the denominators among the shared parameters.
     pub fit_delay: bool,
-    /// Coefficients of the dynamics factors (last among the shared parameters).
+    /// Coefficients of the dynamics factors, denominator then numerator of each (last
+    /// among the shared parameters).
     pub n_factor: usize,
 }
 
@@ -172,7 +174,11 @@ impl Layout {
             n_num: nn,
             n_den: nd,
             fit_delay: model.factor.fit_delay,
-            n_factor: model.dynamics.iter().map(|d| d.den.len()).sum(),
+            n_factor: model
+                .dynamics
+                .iter()
+                .map(|d| d.den.len() + d.num.len())
+                .sum(),
         }
     }
     /// Shared parameters: denominators, the delay when fitted, the dynamics factors.
@@ -205,6 +211,7 @@ pub fn pack(model: &AdditiveModel, lay: &Layout) -> (Vec<f64>, Vec<f64>) {
     }
     for d in &model.dynamics {
         shared.extend_from_slice(&d.den);
+        shared.extend_from_slice(&d.num);
     }
     let mut eta = vec![0.0; m * lay.n_num];
     for (i, s) in model.submodels.iter().enumerate() {
@@ -253,6 +260,9 @@ fn unpack_raw(model: &mut AdditiveModel, lay: &Layout, shared: &[f64], eta: &[f6
         let n = d.den.len();
         d.den.copy_from_slice(&shared[off..off + n]);
         off += n;
+        let n = d.num.len();
+        d.num.copy_from_slice(&shared[off..off + n]);
+        off += n;
     }
 }
 
@@ -283,8 +293,9 @@ pub struct Basis {
     pub f_abs: Vec<f64>,
     /// `1 / F_ke`.
     pub f_inv: Vec<C64>,
-    /// For each fitted factor parameter `q` (delay, then dynamics coefficients):
-    /// `d ln F / d theta_q` at `[q * n + k]` (the same for every entry it affects).
+    /// For each fitted factor parameter `q` (delay, then the dynamics coefficients,
+    /// denominator then numerator of each factor): `d ln F / d theta_q` at `[q * n + k]`
+    /// (the same for every entry it affects).
     pub dlnf: Vec<C64>,
     /// Whether factor parameter `q` affects entry `e`: `[q * m + e]`.
     pub dlnf_mask: Vec<bool>,
@@ -419,7 +430,8 @@ impl Basis {
             for dynf in &model.dynamics {
                 let a = dynf.den_at(w);
                 let ia = a.inv();
-                let h = dynf.num_at(w) * ia;
+                let b = dynf.num_at(w);
+                let h = b * ia;
                 for j in 0..nu {
                     for i in 0..ny {
                         if dynf.affects(i, j) {
@@ -427,13 +439,23 @@ impl Basis {
                         }
                     }
                 }
-                // ln F = -ln A(x) + ...: d/d a~_r = -x^r / A(x)
+                // ln F = ln B(x) - ln A(x) + ...: d/d a~_r = -x^r / A(x),
+                // d/d b~_r = x^r / B(x)
                 let x = C64::new(0.0, w / dynf.scale);
                 let mut xr = x;
                 for _ in 0..dynf.den.len() {
                     dlnf[q * n + k] = -xr * ia;
                     xr *= x;
                     q += 1;
+                }
+                if !dynf.num.is_empty() {
+                    let ib = b.inv();
+                    let mut xr = x;
+                    for _ in 0..dynf.num.len() {
+                        dlnf[q * n + k] = xr * ib;
+                        xr *= x;
+                        q += 1;
+                    }
                 }
             }
         }
@@ -443,7 +465,7 @@ impl Basis {
             q += 1;
         }
         for dynf in &model.dynamics {
-            for _ in 0..dynf.den.len() {
+            for _ in 0..dynf.den.len() + dynf.num.len() {
                 for j in 0..nu {
                     for i in 0..ny {
                         dlnf_mask[q * m + j * ny + i] = dynf.affects(i, j);

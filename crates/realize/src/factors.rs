@@ -120,6 +120,63 @@ impl DynamicsFactor {
             scale: TAU * f_hz,
         }
     }
+    /// A first-order lead-lag `(1 + s / w_z) / (1 + s / w_p)` with its zero at `zero_hz`
+    /// and its pole at `pole_hz` (`w = 2 pi f`): a phase lead between the two when the
+    /// zero is below the pole (an actuator's current-loop lead, a sensor's
+    /// compensation), a lag-lead when it is above. `x = s / w_p`, so `A(x) = 1 + x` and
+    /// `B(x) = 1 + (w_p / w_z) x`.
+    pub fn lead_lag(target: FactorTarget, zero_hz: f64, pole_hz: f64) -> Self {
+        Self {
+            target,
+            den: vec![1.0],
+            num: vec![pole_hz / zero_hz],
+            scale: TAU * pole_hz,
+        }
+    }
+    /// A general second-order factor of unit static gain,
+    /// `(1 + 2 zeta_z s / w_z + s^2 / w_z^2) / (1 + 2 zeta_p s / w_p + s^2 / w_p^2)`:
+    /// zeros at `zero_hz` with damping `zero_zeta` (a negative damping puts them in the
+    /// right half-plane: non-minimum phase), poles at `pole_hz` with damping `pole_zeta`
+    /// (`x = s / w_p`). An anti-resonance/resonance pair of an actuator or sensor mount.
+    pub fn second_order_rational(
+        target: FactorTarget,
+        (zero_hz, zero_zeta): (f64, f64),
+        (pole_hz, pole_zeta): (f64, f64),
+    ) -> Self {
+        let r = pole_hz / zero_hz;
+        Self {
+            target,
+            den: vec![2.0 * pole_zeta, 1.0],
+            num: vec![2.0 * zero_zeta * r, r * r],
+            scale: TAU * pole_hz,
+        }
+    }
+    /// The same factor with a numerator of its denominator's order whose zeros start at
+    /// `zero_hz` (damping `zero_zeta` for a pair; ignored for first order): the
+    /// all-pole factor times `B(s)`, which is 1 at `s = 0`. With the zeros far above the
+    /// band the factor starts as nearly the all-pole one, and a fit frees them.
+    /// An all-pole factor of order 1 or 2 only; `None` otherwise.
+    pub fn with_zeros(&self, zero_hz: f64, zero_zeta: f64) -> Option<Self> {
+        if !(self.num.is_empty() && zero_hz.is_finite() && zero_hz > 0.0) {
+            return None;
+        }
+        let r = self.scale / (TAU * zero_hz);
+        let num = match self.den.len() {
+            1 => vec![r],
+            2 => vec![2.0 * zero_zeta * r, r * r],
+            _ => return None,
+        };
+        Some(Self {
+            num,
+            ..self.clone()
+        })
+    }
+    /// True when a zero lies in the closed right half-plane (a non-minimum-phase
+    /// factor: physically possible, e.g. a non-collocated sensor mount, but worth a
+    /// flag).
+    pub fn is_non_minimum_phase(&self) -> bool {
+        self.zeros().iter().any(|z| z.re >= 0.0)
+    }
     /// `A(j w / scale)`.
     #[inline]
     pub fn den_at(&self, omega: f64) -> C64 {
@@ -229,5 +286,51 @@ impl KnownFactors {
             && self.hold == Hold::None
             && self.dynamics.is_empty()
             && self.crosstalk.is_none()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lead_lag_is_its_zero_over_its_pole() {
+        let d = DynamicsFactor::lead_lag(FactorTarget::Input(0), 300.0, 900.0);
+        for f in [1.0, 300.0, 900.0, 5e3] {
+            let s = C64::new(0.0, TAU * f);
+            let want = (1.0 + s / (TAU * 300.0)) / (1.0 + s / (TAU * 900.0));
+            assert!((d.at(TAU * f) - want).norm() <= 1e-14 * want.norm());
+        }
+        assert!((d.zeros()[0].re + TAU * 300.0).abs() < 1e-9);
+        assert!((d.poles()[0].re + TAU * 900.0).abs() < 1e-9);
+        assert!(d.is_stable() && !d.is_non_minimum_phase());
+        let a = DynamicsFactor::first_order(FactorTarget::Input(0), 900.0);
+        let b = a.with_zeros(300.0, 1.0).unwrap();
+        assert_eq!(b, d);
+        assert!(b.with_zeros(300.0, 1.0).is_none());
+    }
+
+    #[test]
+    fn second_order_rational_has_its_zeros_and_poles() {
+        let d = DynamicsFactor::second_order_rational(
+            FactorTarget::Output(1),
+            (800.0, -0.05),
+            (1200.0, 0.03),
+        );
+        let s = C64::new(0.0, TAU * 1000.0);
+        let (wz, wp) = (TAU * 800.0, TAU * 1200.0);
+        let want =
+            (1.0 - 0.1 * s / wz + s * s / (wz * wz)) / (1.0 + 0.06 * s / wp + s * s / (wp * wp));
+        assert!((d.at(TAU * 1000.0) - want).norm() <= 1e-13 * want.norm());
+        let z = d.zeros();
+        assert_eq!(z.len(), 2);
+        for r in &z {
+            assert!((r.norm() / wz - 1.0).abs() < 1e-12);
+            assert!((r.re / r.norm() - 0.05).abs() < 1e-12);
+        }
+        assert!(d.is_stable() && d.is_non_minimum_phase());
+        let all_pole = DynamicsFactor::second_order(FactorTarget::Output(1), 1200.0, 0.03);
+        assert_eq!(all_pole.with_zeros(800.0, -0.05).unwrap(), d);
+        assert_eq!(d.at(0.0), C64::new(1.0, 0.0));
     }
 }

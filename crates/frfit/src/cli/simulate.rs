@@ -153,16 +153,22 @@ pub struct WaferArgs {
     pub bandwidth_hz: f64,
     /// An undeclared factor of unit static gain on every entry (an amplifier's
     /// bandwidth): `F` for a first-order lag `1 / (1 + s / 2 pi F)`, `F:ZETA` for a
-    /// second-order `w^2 / (s^2 + 2 ZETA w s + w^2)`, `w = 2 pi F`. E.g. `2500`.
+    /// second-order `w^2 / (s^2 + 2 ZETA w s + w^2)`, `w = 2 pi F`;
+    /// `lead-lag:FZ:FP` for `(1 + s / 2 pi FZ) / (1 + s / 2 pi FP)`;
+    /// `rational:FZ:ZZ:FP:ZP` for the second-order factor with zeros at FZ (damping ZZ,
+    /// negative: non-minimum phase) and poles at FP (damping ZP). E.g. `2500`.
     #[arg(long, value_name = "F[:ZETA]")]
     pub common_dynamics: Option<String>,
     /// An undeclared factor on one output row (a sensor or its mount), output 1-based:
-    /// `I:F` (first-order lag) or `I:F:ZETA` (second-order resonance), e.g. `2:1450:0.03`
-    /// for a sensor-mount resonance at 1.45 kHz. Repeatable.
+    /// `I:F` (first-order lag), `I:F:ZETA` (second-order resonance),
+    /// `I:lead-lag:FZ:FP` (zero FZ, pole FP, Hz) or `I:rational:FZ:ZZ:FP:ZP`, e.g.
+    /// `2:1450:0.03` for a sensor-mount resonance at 1.45 kHz. Repeatable.
     #[arg(long, value_name = "I:F[:ZETA]")]
     pub output_dynamics: Vec<String>,
     /// An undeclared factor on one input column (an actuator or its mount), input
-    /// 1-based: `J:F` or `J:F:ZETA` as for `--output-dynamics`. Repeatable.
+    /// 1-based, in the forms of `--output-dynamics`: e.g. `5:800` (a lag at 800 Hz on
+    /// input 5) or `5:lead-lag:300:900` (a phase lead, zero 300 Hz, pole 900 Hz).
+    /// Repeatable.
     #[arg(long, value_name = "J:F[:ZETA]")]
     pub input_dynamics: Vec<String>,
     /// Simulation path.
@@ -262,8 +268,9 @@ fn run_random(a: RandomArgs, quiet: bool) -> Result<(), FrfitError> {
     Ok(())
 }
 
-/// A factor of `--common-dynamics` (`which` = false: `F[:ZETA]`) or of
-/// `--input-dynamics`/`--output-dynamics` (`I:F[:ZETA]`, 1-based), on `target`.
+/// A factor of `--common-dynamics` (`indexed` = false: `F[:ZETA]`,
+/// `lead-lag:FZ:FP`, `rational:FZ:ZZ:FP:ZP`) or of `--input-dynamics`/`--output-dynamics`
+/// (the same after `I:`, 1-based), on `target`.
 fn parse_factor(
     option: &str,
     value: &str,
@@ -288,6 +295,30 @@ fn parse_factor(
     };
     let num = |x: &str| x.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0);
     match rest {
+        ["lead-lag", fz, fp] => {
+            let fz = num(fz).ok_or_else(|| bad("the zero frequency FZ must be > 0 Hz"))?;
+            let fp = num(fp).ok_or_else(|| bad("the pole frequency FP must be > 0 Hz"))?;
+            Ok(realize::DynamicsFactor::lead_lag(target(index), fz, fp))
+        }
+        ["rational", fz, zz, fp, zp] => {
+            let fz = num(fz).ok_or_else(|| bad("the zero frequency FZ must be > 0 Hz"))?;
+            let zz = zz
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && *v != 0.0)
+                .ok_or_else(|| bad("the zero damping ZZ must be finite and not 0"))?;
+            let fp = num(fp).ok_or_else(|| bad("the pole frequency FP must be > 0 Hz"))?;
+            let zp = num(zp).ok_or_else(|| bad("the pole damping ZP must be > 0"))?;
+            Ok(realize::DynamicsFactor::second_order_rational(
+                target(index),
+                (fz, zz),
+                (fp, zp),
+            ))
+        }
+        ["lead-lag", ..] => Err(bad("expected lead-lag:FZ:FP (zero and pole, Hz)")),
+        ["rational", ..] => Err(bad(
+            "expected rational:FZ:ZZ:FP:ZP (zeros FZ Hz with damping ZZ, poles FP Hz with damping ZP)",
+        )),
         [f] => {
             let f = num(f).ok_or_else(|| bad("the corner frequency F must be > 0 Hz"))?;
             Ok(realize::DynamicsFactor::first_order(target(index), f))
@@ -298,9 +329,9 @@ fn parse_factor(
             Ok(realize::DynamicsFactor::second_order(target(index), f, z))
         }
         _ => Err(bad(if indexed {
-            "expected I:F (first order) or I:F:ZETA (second order)"
+            "expected I:F (first order), I:F:ZETA (second order), I:lead-lag:FZ:FP or I:rational:FZ:ZZ:FP:ZP"
         } else {
-            "expected F (first order) or F:ZETA (second order)"
+            "expected F (first order), F:ZETA (second order), lead-lag:FZ:FP or rational:FZ:ZZ:FP:ZP"
         })),
     }
 }
@@ -338,10 +369,23 @@ fn wafer_factors(a: &WaferArgs) -> Result<Vec<realize::DynamicsFactor>, FrfitErr
 /// A factor in words: `first-order lag at 2500 Hz on every entry`.
 fn describe_factor(d: &realize::DynamicsFactor) -> String {
     let f_hz = d.scale / std::f64::consts::TAU;
-    let what = match d.den.as_slice() {
-        [_] => format!("first-order lag at {f_hz} Hz"),
-        [two_zeta, _] => format!("second-order factor at {f_hz} Hz, zeta {}", 0.5 * two_zeta),
-        _ => format!("factor of order {}", d.den.len()),
+    let what = match (d.den.as_slice(), d.num.as_slice()) {
+        ([_], []) => format!("first-order lag at {f_hz} Hz"),
+        ([two_zeta, _], []) => {
+            format!("second-order factor at {f_hz} Hz, zeta {}", 0.5 * two_zeta)
+        }
+        ([_], [b]) => format!("lead-lag, zero at {} Hz, pole at {f_hz} Hz", f_hz / b),
+        ([two_zeta, _], [b1, b2]) => {
+            // B = 1 + 2 zeta_z (s / w_z) + (s / w_z)^2 with s / w_z = x sqrt(b2)
+            let r = b2.sqrt();
+            format!(
+                "second-order rational, zeros at {} Hz (zeta {}), poles at {f_hz} Hz (zeta {})",
+                f_hz / r,
+                0.5 * b1 / r,
+                0.5 * two_zeta
+            )
+        }
+        _ => format!("factor of order {} over {}", d.num.len(), d.den.len()),
     };
     let on = match d.target {
         realize::FactorTarget::All => "every entry".to_string(),
@@ -635,6 +679,7 @@ mod tests {
         with.spectra = None;
         with.common_dynamics = Some("2500".into());
         with.output_dynamics = vec!["2:450:0.03".into()];
+        with.input_dynamics = vec!["3:lead-lag:300:900".into()];
         for a in [plain, with] {
             run(
                 Args {
@@ -654,7 +699,11 @@ mod tests {
             let res = frf_data::C64::new(1.0 - w * w, 0.06 * w).inv();
             for i in 0..4 {
                 for j in 0..13 {
-                    let f = if i == 1 { lag * res } else { lag };
+                    let mut f = if i == 1 { lag * res } else { lag };
+                    if j == 2 {
+                        let s = frf_data::C64::new(0.0, g0.freq_hz(k));
+                        f *= (s / 300.0 + 1.0) / (s / 900.0 + 1.0);
+                    }
                     let want = g0.value(k, i, j) * f;
                     worst = worst.max((g1.value(k, i, j) - want).norm() / want.norm());
                 }
@@ -663,8 +712,14 @@ mod tests {
         assert!(worst < 1e-9, "factors in the noiseless response: {worst:e}");
         let truth = Truth::read(dir.join("dyn.truth.json")).unwrap();
         let list = truth.effects["dynamics"].as_array().unwrap();
-        assert_eq!(list.len(), 2);
+        assert_eq!(list.len(), 3);
         assert_eq!(list[1]["factor"]["target"]["index"], 1);
+        assert_eq!(list[2]["factor"]["target"]["index"], 2);
+        assert_eq!(list[2]["factor"]["num"].as_array().unwrap().len(), 1);
+        assert!(list[2]["description"]
+            .as_str()
+            .unwrap()
+            .contains("zero at 300 Hz"));
         std::fs::remove_dir_all(&dir).ok();
     }
 
@@ -686,6 +741,10 @@ mod tests {
             |a| a.output_dynamics = vec!["5:1450:0.03".into()],
             |a| a.input_dynamics = vec!["0:1000".into()],
             |a| a.input_dynamics = vec!["2:1000:-0.1".into()],
+            |a| a.input_dynamics = vec!["2:lead-lag:300".into()],
+            |a| a.input_dynamics = vec!["2:lead-lag:0:900".into()],
+            |a| a.output_dynamics = vec!["1:rational:800:0:1200:0.03".into()],
+            |a| a.common_dynamics = Some("rational:800:0.1:1200:-0.03".into()),
             |a| {
                 a.common_dynamics = Some("2500".into());
                 a.path = PathArg::Time;

@@ -103,6 +103,14 @@ pub struct FactorStart {
     /// The model delay the factor starts with, seconds, when it takes over part of a
     /// fitted delay ([`traded_common_lag`]); `None`: the delay is left as it is.
     pub delay_s: Option<f64>,
+    /// The zeros the factor starts with, `(Hz, damping)` (damping ignored for order 1):
+    /// a numerator of the denominator's order (a lead-lag, or a second-order rational
+    /// with an anti-resonance), [`DynamicsFactor::with_zeros`]; `None`: an all-pole factor.
+    pub zeros: Option<(f64, f64)>,
+    /// The model's own all-pole dynamics factor (index in its `dynamics`) that this
+    /// factor, with the same poles to start and zeros added, takes the place of: the
+    /// accepted factor tried again with a numerator ([`propose_dynamics`]).
+    pub replaces_factor: Option<usize>,
 }
 
 impl FactorStart {
@@ -117,6 +125,8 @@ impl FactorStart {
                 zeta: f.second_order.zeta.clamp(0.005, 1.0),
                 replaces: Vec::new(),
                 delay_s: None,
+                zeros: None,
+                replaces_factor: None,
             }
         } else {
             let f_hz = if f.pole_hz.is_finite() && f.pole_hz > 0.0 {
@@ -130,6 +140,8 @@ impl FactorStart {
                 zeta: 1.0,
                 replaces: Vec::new(),
                 delay_s: None,
+                zeros: None,
+                replaces_factor: None,
             }
         }
     }
@@ -143,17 +155,25 @@ impl FactorStart {
                 "must be > 0 Hz",
             ));
         }
-        match self.order {
-            1 => Ok(DynamicsFactor::first_order(target, self.f_hz)),
+        let all_pole = match self.order {
+            1 => DynamicsFactor::first_order(target, self.f_hz),
             2 if self.zeta.is_finite() && self.zeta > 0.0 => {
-                Ok(DynamicsFactor::second_order(target, self.f_hz, self.zeta))
+                DynamicsFactor::second_order(target, self.f_hz, self.zeta)
             }
-            2 => Err(RivError::invalid(
-                "factor damping",
-                self.zeta,
-                "must be > 0",
-            )),
-            o => Err(RivError::invalid("factor order", o, "must be 1 or 2")),
+            2 => {
+                return Err(RivError::invalid(
+                    "factor damping",
+                    self.zeta,
+                    "must be > 0",
+                ))
+            }
+            o => return Err(RivError::invalid("factor order", o, "must be 1 or 2")),
+        };
+        match self.zeros {
+            None => Ok(all_pole),
+            Some((f, z)) => all_pole.with_zeros(f, z).ok_or_else(|| {
+                RivError::invalid("factor zero frequency", f, "must be finite and > 0 Hz")
+            }),
         }
     }
 }
@@ -199,7 +219,16 @@ impl Candidate {
                 let replaced: Vec<String> =
                     start.replaces.iter().map(|i| format!(":m{i}")).collect();
                 let traded = if start.delay_s.is_some() { ":d" } else { "" };
-                format!("{which}:{}{}{traded}", start.order, replaced.concat())
+                let zeros = if start.zeros.is_some() { ":z" } else { "" };
+                let own = start
+                    .replaces_factor
+                    .map(|k| format!(":f{k}"))
+                    .unwrap_or_default();
+                format!(
+                    "{which}:{}{}{traded}{own}{zeros}",
+                    start.order,
+                    replaced.concat()
+                )
             }
             Candidate::Delay {
                 start: DelayStart::DataSlope,
@@ -251,6 +280,32 @@ impl Candidate {
         }
     }
 
+    /// The start of a dynamics-factor candidate (`None` for the other effects).
+    pub fn factor_start(&self) -> Option<&FactorStart> {
+        match self {
+            Candidate::InputDynamics { start, .. } | Candidate::OutputDynamics { start, .. } => {
+                Some(start)
+            }
+            _ => None,
+        }
+    }
+
+    /// The same dynamics-factor candidate (same effect and support) from `start`; any
+    /// other candidate is returned as it is.
+    pub fn with_start(&self, start: FactorStart) -> Candidate {
+        match self {
+            Candidate::InputDynamics { inputs, .. } => Candidate::InputDynamics {
+                inputs: inputs.clone(),
+                start,
+            },
+            Candidate::OutputDynamics { outputs, .. } => Candidate::OutputDynamics {
+                outputs: outputs.clone(),
+                start,
+            },
+            other => other.clone(),
+        }
+    }
+
     /// True for a dynamics factor common to every entry.
     pub fn is_common_factor(&self) -> bool {
         match self {
@@ -280,6 +335,14 @@ fn dynamics(
         }
     };
     let mut m = model.clone();
+    if let Some(k) = start.replaces_factor {
+        if k >= m.dynamics.len() {
+            return Err(RivError::Structure(format!(
+                "dynamics factor {k} that the candidate would replace is not in the model"
+            )));
+        }
+        m.dynamics.remove(k);
+    }
     let mut gone = start.replaces.clone();
     gone.sort_unstable();
     gone.dedup();
@@ -391,6 +454,8 @@ fn local_modes(
                 zeta,
                 replaces: vec![sub],
                 delay_s: None,
+                zeros: None,
+                replaces_factor: None,
             },
         ));
     }
@@ -479,6 +544,8 @@ fn above_band(
             zeta,
             replaces: Vec::new(),
             delay_s: None,
+            zeros: None,
+            replaces_factor: None,
         },
     ))
 }
@@ -607,6 +674,8 @@ fn traded_common_lag(
                 zeta: 1.0,
                 replaces: Vec::new(),
                 delay_s: Some(d - 1.0 / (std::f64::consts::TAU * f_hz)),
+                zeros: None,
+                replaces_factor: None,
             },
             base,
             c,
@@ -924,6 +993,8 @@ fn propose_dynamics(
         )
     };
     let mut any_support = false;
+    // the all-pole candidates from the residual's signatures, to be tried with zeros too
+    let mut twins: Vec<(Candidate, String)> = Vec::new();
     // the keys proposed in this round (a start above the band may repeat a signature's)
     let mut pushed: Vec<(Effect, String)> = Vec::new();
     for (effect, list, input) in [
@@ -941,6 +1012,7 @@ fn propose_dynamics(
         let on = format!("{} {}", if input { "input" } else { "output" }, f.index + 1);
         let ev = describe(f, on, &start);
         let candidate = one_factor(input, f.index, start);
+        twins.push((candidate.clone(), ev.clone()));
         if seen(effect, &candidate.key()) {
             continue;
         }
@@ -1026,8 +1098,180 @@ fn propose_dynamics(
             inputs: (1..=model.nu()).collect(),
             start,
         };
+        twins.push((candidate.clone(), ev.clone()));
         if !seen(Effect::InputDynamics, &candidate.key()) {
             push(candidate, ev);
         }
     }
+    // the model's own all-pole factors (accepted in an earlier round), tried again with
+    // a numerator of their order in their place
+    for (k, d) in model.dynamics.iter().enumerate() {
+        if !d.num.is_empty() || !(1..=2).contains(&d.den.len()) {
+            continue;
+        }
+        let Some(p) = d.poles().into_iter().max_by(|a, b| a.im.total_cmp(&b.im)) else {
+            continue;
+        };
+        let start = FactorStart {
+            order: d.den.len(),
+            f_hz: p.norm() / std::f64::consts::TAU,
+            zeta: if d.den.len() == 2 {
+                -p.re / p.norm()
+            } else {
+                1.0
+            },
+            replaces: Vec::new(),
+            delay_s: None,
+            zeros: None,
+            replaces_factor: Some(k),
+        };
+        // an overdamped pair (two real poles) has no (frequency, damping) start of the
+        // same factor
+        if start.order == 2 && !(p.im > 0.0 && start.zeta > 0.0) {
+            continue;
+        }
+        let candidate = match d.target {
+            FactorTarget::Input(j) => one_factor(true, j, start),
+            FactorTarget::Output(i) => one_factor(false, i, start),
+            FactorTarget::All => Candidate::InputDynamics {
+                inputs: (1..=model.nu()).collect(),
+                start,
+            },
+        };
+        twins.push((
+            candidate,
+            format!("the model's factor {} ({:?}, all-pole)", k + 1, d.target),
+        ));
+    }
+    let f_top = band.1;
+    for (all_pole, ev) in twins {
+        let t_screen = std::time::Instant::now();
+        let Some((twin, base, screened)) = with_numerator(model, fd, &all_pole, f_top) else {
+            continue;
+        };
+        let t_screen = t_screen.elapsed().as_secs_f64();
+        if seen(twin.effect(), &twin.key()) {
+            continue;
+        }
+        let Some(start) = twin.factor_start() else {
+            continue;
+        };
+        let (zf, zz) = start.zeros.unwrap_or((f64::NAN, f64::NAN));
+        // a screened zero on its pole cancels the factor: nothing for a refit to test
+        if screened >= base || (start.order == 1 && (zf / start.f_hz).ln().abs() < 0.05) {
+            continue;
+        }
+        let shape = if start.order == 1 {
+            format!("zero at {zf:.1} Hz, pole at {:.1} Hz", start.f_hz)
+        } else {
+            format!(
+                "zeros at {zf:.1} Hz (zeta {zz:.3}), poles at {:.1} Hz (zeta {:.3})",
+                start.f_hz, start.zeta
+            )
+        };
+        let ev = format!(
+            "{ev}; with a numerator of its order (a {}): {shape}, screened by the cost after the numerator fit ({screened:.4e}, the all-pole start {base:.4e}; {t_screen:.1} s); its zeros must be significant beside the all-pole factor",
+            if start.order == 1 {
+                "lead-lag"
+            } else {
+                "second-order rational"
+            }
+        );
+        push(twin, ev);
+    }
 }
+
+/// The start of the order-(n/n) rational twin of the all-pole dynamics candidate
+/// `all_pole`: for order 1 the lead-lag `(1 + s / w_z) / (1 + s / w_p)` with its zero
+/// and pole on a log grid of [`NUMERATOR_GRID`] times the top line `f_top` (a lead,
+/// which no all-pole factor makes, and a lag-lead alike), for order 2 the candidate's
+/// poles with zeros on the same frequency grid and damping 0.02..0.7; each point scored
+/// by the cost after the numerator fit (eq. 24: the submodel numerators are linear given
+/// the poles and the factor, so each point is one convex fit), refined three times on a
+/// 3 x 3 pattern of halving steps around the best (60 fits for order 1, 48 for order
+/// 2). The refit then frees zeros and poles, and the trial's F test of the zeros
+/// against the all-pole refit decides. Returns the twin, the numerator-fit cost of the
+/// all-pole start and the screened one; `None` when nothing could be fitted.
+fn with_numerator(
+    model: &AdditiveModel,
+    fd: &FitData,
+    all_pole: &Candidate,
+    f_top: f64,
+) -> Option<(Candidate, f64, f64)> {
+    let start = all_pole.factor_start()?;
+    if start.zeros.is_some() || !(f_top.is_finite() && f_top > 0.0) {
+        return None;
+    }
+    let twin = |pole_hz: f64, zero_hz: f64, zero_zeta: f64| -> Candidate {
+        let mut s = start.clone();
+        if s.order == 1 {
+            s.f_hz = pole_hz;
+        }
+        s.zeros = Some((zero_hz, zero_zeta));
+        all_pole.with_start(s)
+    };
+    let cost = |c: &Candidate| -> f64 {
+        match c.augment(model) {
+            Ok(mut m) => additive_riv::fit_numerators(&mut m, fd).unwrap_or(f64::INFINITY),
+            Err(_) => f64::INFINITY,
+        }
+    };
+    let base = cost(all_pole);
+    let (lo, hi) = NUMERATOR_GRID;
+    let n = 6;
+    let step = (hi / lo).ln() / (n - 1) as f64;
+    let freqs: Vec<f64> = (0..n)
+        .map(|a| f_top * lo * (step * a as f64).exp())
+        .collect();
+    // (log of the first coordinate, log of the second): order 1 (pole, zero) in Hz,
+    // order 2 (zero Hz, zero damping)
+    let point = |u: f64, v: f64| -> Candidate {
+        if start.order == 1 {
+            twin(u.exp(), v.exp(), 1.0)
+        } else {
+            twin(start.f_hz, u.exp(), v.exp().min(1.0))
+        }
+    };
+    let grid: Vec<(f64, f64)> = if start.order == 1 {
+        freqs
+            .iter()
+            .flat_map(|&p| freqs.iter().map(move |&z| (p.ln(), z.ln())))
+            .collect()
+    } else {
+        freqs
+            .iter()
+            .flat_map(|&z| [0.02f64, 0.1, 0.3, 0.7].map(|d| (z.ln(), d.ln())))
+            .collect()
+    };
+    let pick = |pts: Vec<(f64, f64)>| -> (f64, f64, f64) {
+        pts.into_par_iter()
+            .map(|(u, v)| (cost(&point(u, v)), u, v))
+            .reduce(
+                || (f64::INFINITY, 0.0, 0.0),
+                |a, b| if b.0 < a.0 { b } else { a },
+            )
+    };
+    let mut best = pick(grid);
+    let (mut hu, mut hv) = (step, if start.order == 1 { step } else { 0.6 });
+    for _ in 0..3 {
+        hu /= 2.0;
+        hv /= 2.0;
+        let (u0, v0) = (best.1, best.2);
+        let around: Vec<(f64, f64)> = (-1..=1)
+            .flat_map(|a| (-1..=1).map(move |b| (u0 + hu * a as f64, v0 + hv * b as f64)))
+            .filter(|&(a, b)| (a, b) != (u0, v0))
+            .collect();
+        let r = pick(around);
+        if r.0 < best.0 {
+            best = r;
+        }
+    }
+    best.0
+        .is_finite()
+        .then(|| (point(best.1, best.2), base, best.0))
+}
+
+/// The span of [`with_numerator`]'s frequency grid, in multiples of the top line: from
+/// a corner near the bottom of a typical motion band to a zero far enough above the top
+/// line that the factor is nearly all-pole there.
+const NUMERATOR_GRID: (f64, f64) = (0.02, 4.0);

@@ -88,6 +88,10 @@ pub enum FittedEffect {
         /// Its zeros (none for an all-pole factor).
         #[serde(skip_serializing_if = "Vec::is_empty")]
         zeros: Vec<PoleParams>,
+        /// With zeros: whether one lies in the closed right half-plane (physically
+        /// possible, e.g. a non-collocated mount, but worth a look).
+        #[serde(skip_serializing_if = "Option::is_none")]
+        non_minimum_phase: Option<bool>,
     },
     /// `output_dynamics`: a factor on one output row, or common to every entry.
     OutputDynamics {
@@ -102,6 +106,10 @@ pub enum FittedEffect {
         /// Its zeros (none for an all-pole factor).
         #[serde(skip_serializing_if = "Vec::is_empty")]
         zeros: Vec<PoleParams>,
+        /// With zeros: whether one lies in the closed right half-plane (physically
+        /// possible, e.g. a non-collocated mount, but worth a look).
+        #[serde(skip_serializing_if = "Option::is_none")]
+        non_minimum_phase: Option<bool>,
     },
 }
 
@@ -185,7 +193,7 @@ impl FittedEffect {
                 FittedEffect::Stiffness { f_hz, zeta }
             }
             Candidate::InputDynamics { inputs, start } => {
-                let (poles, zeros) = fitted_roots(m, start);
+                let (poles, zeros, non_minimum_phase) = fitted_roots(m, start);
                 FittedEffect::InputDynamics {
                     inputs: inputs.clone(),
                     support: if candidate.is_common_factor() {
@@ -196,10 +204,11 @@ impl FittedEffect {
                     order: start.order,
                     poles,
                     zeros,
+                    non_minimum_phase,
                 }
             }
             Candidate::OutputDynamics { outputs, start } => {
-                let (poles, zeros) = fitted_roots(m, start);
+                let (poles, zeros, non_minimum_phase) = fitted_roots(m, start);
                 FittedEffect::OutputDynamics {
                     outputs: outputs.clone(),
                     support: if candidate.is_common_factor() {
@@ -210,6 +219,7 @@ impl FittedEffect {
                     order: start.order,
                     poles,
                     zeros,
+                    non_minimum_phase,
                 }
             }
         }
@@ -228,8 +238,12 @@ fn root_params(p: &realize::C64) -> PoleParams {
 }
 
 /// The poles and zeros of the newest dynamics factor of `m` (the candidate's; one of
-/// each complex pair, the upper; lowest frequency first), or the starting pole when it has none.
-fn fitted_roots(m: &AdditiveModel, start: &FactorStart) -> (Vec<PoleParams>, Vec<PoleParams>) {
+/// each complex pair, the upper; lowest frequency first), or the starting pole when it
+/// has none; with zeros, whether one is in the closed right half-plane.
+fn fitted_roots(
+    m: &AdditiveModel,
+    start: &FactorStart,
+) -> (Vec<PoleParams>, Vec<PoleParams>, Option<bool>) {
     // lowest frequency first: the factor's corner, then any far pole
     let upper = |v: Vec<realize::C64>| -> Vec<PoleParams> {
         let mut r: Vec<PoleParams> = v.iter().filter(|p| p.im >= 0.0).map(root_params).collect();
@@ -237,7 +251,11 @@ fn fitted_roots(m: &AdditiveModel, start: &FactorStart) -> (Vec<PoleParams>, Vec
         r
     };
     match m.dynamics.last() {
-        Some(d) => (upper(d.poles()), upper(d.zeros())),
+        Some(d) => (
+            upper(d.poles()),
+            upper(d.zeros()),
+            (!d.num.is_empty()).then(|| d.is_non_minimum_phase()),
+        ),
         None => (
             vec![PoleParams {
                 f_hz: start.f_hz,
@@ -246,6 +264,7 @@ fn fitted_roots(m: &AdditiveModel, start: &FactorStart) -> (Vec<PoleParams>, Vec
                 im: None,
             }],
             Vec::new(),
+            None,
         ),
     }
 }

@@ -356,16 +356,25 @@ fn round(
             .collect::<Vec<_>>()
     };
     // screened refits that can still be the round's best continue to convergence
+    // the rational twins of dynamics factors are judged after the round (their zeros'
+    // own F test, `trial::test_zeros`): they set no bar for the others' screening
+    let is_twin = |t: &Trial| {
+        t.candidate
+            .as_ref()
+            .and_then(|c| c.factor_start())
+            .is_some_and(|s| s.zeros.is_some())
+    };
     let finish = |trials: Vec<Trial>| -> Vec<Trial> {
         let best_drop = trials
             .iter()
+            .filter(|t| !is_twin(t))
             .map(|t| current.cost - t.cost)
             .fold(0.0_f64, f64::max);
         // a screened cost bounds the converged one from above, so the lowest cost of a
         // passing trial is one the round's best reaches at least
         let best_cost = trials
             .iter()
-            .filter(|t| t.passes())
+            .filter(|t| t.passes() && !is_twin(t))
             .map(|t| t.cost)
             .fold(f64::INFINITY, f64::min);
         trials
@@ -418,6 +427,8 @@ fn round(
         trials.extend(run(modes.into_iter().map(Job::Candidate).collect()));
         trials = finish(trials);
     }
+    // a factor's zeros must be significant beside the same factor without them
+    trial::test_zeros(&mut trials, fd, cfg, &current);
     st.n_tests = n_tests.into_inner();
     (!trials.is_empty()).then_some(trials)
 }

@@ -35,6 +35,8 @@ pub struct Trial {
     /// Set while the refit stopped at the screening cap before converging: what
     /// [`finish`] needs to continue it.
     pub screened: Option<Screened>,
+    /// The candidate refitted, for a trial of one proposed candidate.
+    pub candidate: Option<super::Candidate>,
 }
 
 /// A candidate refit stopped at the screening cap ([`refit_candidate`] with `cap`).
@@ -231,6 +233,7 @@ pub fn joint_missed_modes(
         added,
         joint_modes: joint,
         screened: None,
+        candidate: None,
     })
 }
 
@@ -288,6 +291,7 @@ pub fn restart_with_delay(
         added,
         joint_modes: Vec::new(),
         screened: None,
+        candidate: None,
     })
 }
 
@@ -385,6 +389,7 @@ pub fn suspended_body(
             added: 0,
             joint_modes: Vec::new(),
             screened: None,
+            candidate: None,
         },
         accepted,
     ))
@@ -453,6 +458,97 @@ fn judge(
         added,
         joint_modes: Vec::new(),
         screened: None,
+        candidate: Some(candidate.clone()),
+    }
+}
+
+/// The zeros of a dynamics factor tested beside the same factor without them: for every
+/// trial whose candidate is the order-(n/n) rational twin of an all-pole candidate of
+/// the round (same effect, support and order), the F test of the `n` numerator
+/// coefficients (the two models are nested: zeros at infinity give the all-pole factor)
+/// on the cost the twin lowers below the all-pole refit. A twin whose zeros are not
+/// significant there, or that fits no better, is held below its critical value: the
+/// all-pole factor is the simpler model of the same physics. An all-pole refit that left
+/// a pole in the right half-plane (a lead that only an unstable pole can mimic) is no
+/// reference: the twin is then tested against the current model alone. A twin common to
+/// every entry whose refit put a zero in the right half-plane is held back too: there
+/// `(1 - s / w_z) / (1 + s / w_p)` is the Pade form of a delay, which the catalogue's
+/// `delay` (one parameter) explains more simply (on the simulated stage with a common
+/// lag and an undeclared delay, such a twin at 2.7 kHz took the delay's place).
+pub fn test_zeros(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConfig, current: &Current) {
+    let stable = super::accept::unstable_parts(current.model);
+    let siblings: Vec<(String, f64, validation::residual::Effect)> = trials
+        .iter()
+        .filter_map(|t| {
+            let c = t.candidate.as_ref()?;
+            let start = c.factor_start()?;
+            (start.zeros.is_none() && super::accept::unstable_parts(&t.model) <= stable)
+                .then(|| (c.key(), t.cost, c.effect()))
+        })
+        .collect();
+    for t in trials.iter_mut() {
+        let Some(c) = &t.candidate else { continue };
+        let Some(start) = c.factor_start() else {
+            continue;
+        };
+        if start.zeros.is_none() {
+            continue;
+        }
+        let rhp_zero = t
+            .model
+            .dynamics
+            .last()
+            .is_some_and(|d| d.is_non_minimum_phase());
+        // a zero the refit moved beyond the screening grid's top (4 times the top line)
+        // does not show in the band: what it gained is the misfit of the rest of the
+        // model (on the reference plate with an output lag and four missed modes, a
+        // zero at 43 kHz moved the lag from 900 to 933 Hz)
+        let f_far = 4.0 * fd.band_hz.1;
+        let far_zero = t.model.dynamics.last().is_some_and(|d| {
+            d.zeros()
+                .iter()
+                .any(|z| z.norm() / std::f64::consts::TAU > f_far)
+        });
+        if far_zero {
+            t.evidence = format!(
+                "{}; its refit put a zero above {f_far:.0} Hz, beyond what the band shows; not accepted",
+                t.evidence
+            );
+            t.f = t.f.min(t.f_crit * (1.0 - 1e-12));
+            continue;
+        }
+        if c.is_common_factor() && rhp_zero {
+            t.evidence = format!(
+                "{}; its refit put a zero in the right half-plane on every entry: the Pade form of a delay, which the delay explains with one parameter; not accepted",
+                t.evidence
+            );
+            t.f = t.f.min(t.f_crit * (1.0 - 1e-12));
+            continue;
+        }
+        let key = c.key();
+        let base_key = key.strip_suffix(":z").unwrap_or(&key);
+        let Some((_, all_pole_cost, _)) = siblings
+            .iter()
+            .find(|(k, _, e)| k == base_key && *e == c.effect())
+        else {
+            continue;
+        };
+        let n = start.order;
+        let (_, f, f_crit) = f_test(&t.model, fd, *all_pole_cost, t.cost, n, cfg);
+        let significant = t.cost < *all_pole_cost && f > f_crit;
+        t.evidence = format!(
+            "{}; its {n} zero coefficient(s) beside the all-pole factor's refit (cost {all_pole_cost:.4e} -> {:.4e}): F = {f:.3e} (critical {f_crit:.3}){}",
+            t.evidence,
+            t.cost,
+            if significant {
+                ""
+            } else {
+                ": not significant, the all-pole factor is kept"
+            }
+        );
+        if !significant {
+            t.f = t.f.min(t.f_crit * (1.0 - 1e-12));
+        }
     }
 }
 

@@ -131,20 +131,28 @@ pub fn final_model_summary(fit: &Fit<AdditiveModel>) -> FinalModelSummary {
                     FactorTarget::Output(i) => format!("output {}", i + 1),
                     FactorTarget::All => "all entries".into(),
                 };
-                let poles: Vec<String> = d
-                    .poles()
-                    .iter()
-                    .filter(|p| p.im >= 0.0)
-                    .map(|p| match p.im {
-                        0.0 => format!("{:.1} Hz", p.norm() / std::f64::consts::TAU),
-                        _ => format!(
-                            "{:.1} Hz (zeta {:.3})",
-                            p.norm() / std::f64::consts::TAU,
-                            -p.re / p.norm()
-                        ),
-                    })
-                    .collect();
-                format!("{target}: poles at {}", poles.join(", "))
+                let roots = |r: Vec<realize::C64>| -> String {
+                    r.iter()
+                        .filter(|p| p.im >= 0.0)
+                        .map(|p| match p.im {
+                            0.0 => format!("{:.1} Hz", p.norm() / std::f64::consts::TAU),
+                            _ => format!(
+                                "{:.1} Hz (zeta {:.3})",
+                                p.norm() / std::f64::consts::TAU,
+                                -p.re / p.norm()
+                            ),
+                        })
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                let mut s = format!("{target}: poles at {}", roots(d.poles()));
+                if !d.num.is_empty() {
+                    s.push_str(&format!(", zeros at {}", roots(d.zeros())));
+                    if d.is_non_minimum_phase() {
+                        s.push_str(" (non-minimum phase)");
+                    }
+                }
+                s
             })
             .collect(),
         iterations: fit.iterations,
