@@ -207,11 +207,7 @@ impl FitContext {
     /// The CMIF of the band, computed on the first call and kept (the CMIF start, SK's
     /// peaks and the report read it; a subspace start does not).
     pub fn cmif(&self) -> Result<&Arc<Cmif>, FrfitError> {
-        if let Some(c) = self.cmif.get() {
-            return Ok(c);
-        }
-        let c = Arc::new(cmif(&self.band)?);
-        Ok(self.cmif.get_or_init(|| c))
+        cmif_once(&self.cmif, &self.band)
     }
 
     /// The noise level the diagnosis loop judges residuals against: the measured (or
@@ -297,4 +293,17 @@ impl FitContext {
             ..fc
         }
     }
+}
+
+/// The CMIF of `band` kept in `cell`: computed on the first call, read afterwards (the
+/// context and the run's output hold the same cell).
+pub(super) fn cmif_once<'a>(
+    cell: &'a OnceLock<Arc<Cmif>>,
+    band: &Frf,
+) -> Result<&'a Arc<Cmif>, FrfitError> {
+    if let Some(c) = cell.get() {
+        return Ok(c);
+    }
+    let c = Arc::new(cmif(band)?);
+    Ok(cell.get_or_init(|| c))
 }

@@ -166,6 +166,11 @@ pub fn chain_fit(
     cfg: &PipelineConfig,
     fc: &additive_riv::FitterConfig,
 ) -> Result<FirstFit, FrfitError> {
+    let (init, refine) = super::default_chain(
+        &cfg.init,
+        &cfg.refine,
+        frf_data::FrfDataset::ny(&ctx.band) * frf_data::FrfDataset::nu(&ctx.band),
+    );
     let settings = ChainSettings {
         hold: fc.hold,
         delay: fc.delay,
@@ -179,7 +184,7 @@ pub fn chain_fit(
         // for the initialisers that read it)
         precomputed: Precomputed {
             delay: ctx.delay_estimate.clone(),
-            cmif: None,
+            cmif: reads_cmif(&init).then(|| ctx.cmif().cloned()).transpose()?,
         },
     };
     let opts = AdditiveOptions {
@@ -191,18 +196,6 @@ pub fn chain_fit(
         // reference files (a spurious second input_dynamics step on the input-lag case)
         complete_start: None,
         sk_bands: cfg.sk_bands.clone(),
-    };
-    let (init, refine) = super::default_chain(
-        &cfg.init,
-        &cfg.refine,
-        frf_data::FrfDataset::ny(&ctx.band) * frf_data::FrfDataset::nu(&ctx.band),
-    );
-    let settings = ChainSettings {
-        precomputed: Precomputed {
-            cmif: reads_cmif(&init).then(|| ctx.cmif().cloned()).transpose()?,
-            ..settings.precomputed
-        },
-        ..settings
     };
     let result = run_chain(&ctx.band, &init, &refine, &settings, &opts)?;
     let t_numerators = std::time::Instant::now();

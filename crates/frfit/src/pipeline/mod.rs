@@ -241,11 +241,7 @@ impl PipelineOutput {
 
     /// The CMIF of the band (computed on the first call when the run did not need it).
     pub fn cmif(&self) -> Result<&Cmif, FrfitError> {
-        if let Some(c) = self.cmif.get() {
-            return Ok(c);
-        }
-        let c = std::sync::Arc::new(frf_data::cmif::cmif(&self.band)?);
-        Ok(self.cmif.get_or_init(|| c))
+        Ok(context::cmif_once(&self.cmif, &self.band)?)
     }
 
     /// What [`crate::report::write_report`] needs from this run, under `title`.
