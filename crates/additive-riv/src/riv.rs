@@ -22,6 +22,13 @@ pub struct RivConfig {
     pub param_tol: f64,
     /// Stop when the relative cost change stays below this for two steps. Default: 1e-10.
     pub cost_tol: f64,
+    /// Stop as [`Convergence::Stalled`] after [`STALL_STEPS`] steps in a row that were
+    /// cut to at most [`STALL_STEP_FRACTION`] of the update and each lowered the cost by
+    /// less than this, relative. Such steps crawl along a direction that is barely one
+    /// of descent (the refined-IV fixed point is not the cost's minimum there: an effect
+    /// the model lacks, or a start far off); near the optimum of a model that holds the
+    /// data the iterations take full steps and never stall. Default: 1e-6.
+    pub stall_tol: f64,
     /// Halve a step (up to 12 times) when it raises the cost; the fixed point is the same
     /// as without. Default: true.
     pub backtracking: bool,
@@ -41,6 +48,7 @@ impl Default for RivConfig {
             max_iterations: 50,
             param_tol: 1e-9,
             cost_tol: 1e-10,
+            stall_tol: 1e-6,
             backtracking: true,
             solver: StepSolver::Structured,
             parallel: true,
@@ -119,6 +127,13 @@ fn rel_norm(d: &[f64], x: &[f64]) -> f64 {
         dn / xn
     }
 }
+
+/// Consecutive stalled steps ([`RivConfig::stall_tol`]) after which the iterations stop.
+pub const STALL_STEPS: usize = 3;
+
+/// The largest fraction of the full update a step may have been cut to and still count
+/// as stalled ([`RivConfig::stall_tol`]): three halvings.
+pub const STALL_STEP_FRACTION: f64 = 0.125;
 
 /// SK steps of the rescue when the refined-IV iterations stop far from the optimum.
 pub const SK_RESCUE: usize = 10;
@@ -221,6 +236,8 @@ fn iterate_core(
     let mut small_cost_steps = 0;
     let mut worst_cond: f64 = 1.0;
     let mut non_descent = 0;
+    // consecutive stalled steps and their relative cost decrease in total
+    let (mut stalled, mut stalled_decrease) = (0, 0.0);
     let method = cfg.method;
     for it in 1..=cfg.max_iterations {
         iterations = it;
@@ -330,6 +347,19 @@ fn iterate_core(
                 relative_change: rel,
             };
             break;
+        }
+        if alpha <= STALL_STEP_FRACTION && rel_cost < cfg.stall_tol {
+            stalled += 1;
+            stalled_decrease += rel_cost;
+            if stalled >= STALL_STEPS {
+                convergence = Convergence::Stalled {
+                    steps: stalled,
+                    relative_decrease: stalled_decrease,
+                };
+                break;
+            }
+        } else {
+            (stalled, stalled_decrease) = (0, 0.0);
         }
         if rel_cost < cfg.cost_tol {
             small_cost_steps += 1;

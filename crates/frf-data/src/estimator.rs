@@ -33,6 +33,17 @@ pub enum Convergence {
         /// The limit.
         limit: usize,
     },
+    /// The iterations stalled: for several steps in a row the update had to be cut to a
+    /// small fraction before it lowered the cost, and it lowered it by almost nothing.
+    /// The estimate is where the iterations stood, not an optimum: the iteration's fixed
+    /// point is not a minimum of the cost there (an effect the model does not hold, or
+    /// a start far from the optimum).
+    Stalled {
+        /// The consecutive stalled steps before the stop.
+        steps: usize,
+        /// Their relative cost decrease, in total.
+        relative_decrease: f64,
+    },
     /// The iterations failed (singular system, non-finite cost, divergence).
     Failed {
         /// What happened.
@@ -67,6 +78,12 @@ impl Convergence {
             Convergence::MaxIterations { limit } => {
                 format!("NOT converged: stopped at the limit of {limit} iterations")
             }
+            Convergence::Stalled {
+                steps,
+                relative_decrease,
+            } => format!(
+                "NOT converged: stalled ({steps} steps in a row cut to a small fraction of the update lowered the cost by {relative_decrease:.1e} relative in total)"
+            ),
             Convergence::Failed { reason } => format!("FAILED: {reason}"),
         }
     }

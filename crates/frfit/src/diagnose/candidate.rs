@@ -837,44 +837,8 @@ pub fn propose(
             );
         }
     }
-    if !model.factor.fit_delay && plausible(&an.phase_trend.fit, alpha) {
-        push(
-            Candidate::Delay {
-                seconds: an.phase_trend.delay_s,
-                start: DelayStart::ResidualSlope,
-            },
-            detail(an, Effect::Delay),
-        );
-    }
-    // The residual's phase slope is biased when the model is far off (modes fitted
-    // without the delay absorb part of it); the data's own phase slope, from the delay
-    // estimator of frf-data, is a second start for the same effect.
-    if let Some(total) = data_delay_s {
-        let hold_half = match model.domain() {
-            additive_riv::Domain::ZohDiscrete { ts } => 0.5 * ts,
-            additive_riv::Domain::Continuous => 0.0,
-        };
-        let d = total - hold_half - model.factor.delay_s;
-        let d_trend = an.phase_trend.delay_s;
-        if !model.factor.fit_delay
-            && an.significant
-            && d.abs() > 1e-6
-            && (d - d_trend).abs() > 1e-6
-            && !seen(Effect::Delay, "data")
-        {
-            push(
-                Candidate::Delay {
-                    seconds: d,
-                    start: DelayStart::DataSlope,
-                },
-                format!(
-                    "phase slope of the data: {:.2} us in all, {:.2} us beyond the model's delay (the residual's slope says {:.2} us)",
-                    total * 1e6,
-                    d * 1e6,
-                    d_trend * 1e6
-                ),
-            );
-        }
+    for p in delay_proposals(model, an, alpha, tested, data_delay_s) {
+        push(p.candidate, p.evidence);
     }
     if let (Some(fs), additive_riv::Domain::Continuous) = (fs_hz, model.domain()) {
         if model.factor.derivative_order == 0 {
@@ -940,6 +904,67 @@ pub fn propose(
         }
     }
     propose_dynamics(model, an, fd, alpha, &seen, &mut push);
+    out
+}
+
+/// The `delay` candidates of `propose` alone (cheap: no refit, no screening), for the
+/// restart test before the loop ([`super::better_first_fit`]): the residual's phase slope
+/// when it is plausible, and the data's own phase slope (`data_delay_s`, the total
+/// delay of the data) beyond the model's delay and hold.
+pub fn delay_proposals(
+    model: &AdditiveModel,
+    an: &ResidualAnalysis,
+    alpha: f64,
+    tested: &[(Effect, String)],
+    data_delay_s: Option<f64>,
+) -> Vec<Proposal> {
+    let mut out: Vec<Proposal> = Vec::new();
+    let mut push = |candidate: Candidate, evidence: String| {
+        out.push(Proposal {
+            candidate,
+            evidence,
+        })
+    };
+    let seen = |e: Effect, key: &str| tested.iter().any(|(x, k)| *x == e && k == key);
+    if !model.factor.fit_delay && plausible(&an.phase_trend.fit, alpha) {
+        push(
+            Candidate::Delay {
+                seconds: an.phase_trend.delay_s,
+                start: DelayStart::ResidualSlope,
+            },
+            detail(an, Effect::Delay),
+        );
+    }
+    // The residual's phase slope is biased when the model is far off (modes fitted
+    // without the delay absorb part of it); the data's own phase slope, from the delay
+    // estimator of frf-data, is a second start for the same effect.
+    if let Some(total) = data_delay_s {
+        let hold_half = match model.domain() {
+            additive_riv::Domain::ZohDiscrete { ts } => 0.5 * ts,
+            additive_riv::Domain::Continuous => 0.0,
+        };
+        let d = total - hold_half - model.factor.delay_s;
+        let d_trend = an.phase_trend.delay_s;
+        if !model.factor.fit_delay
+            && an.significant
+            && d.abs() > 1e-6
+            && (d - d_trend).abs() > 1e-6
+            && !seen(Effect::Delay, "data")
+        {
+            push(
+                Candidate::Delay {
+                    seconds: d,
+                    start: DelayStart::DataSlope,
+                },
+                format!(
+                    "phase slope of the data: {:.2} us in all, {:.2} us beyond the model's delay (the residual's slope says {:.2} us)",
+                    total * 1e6,
+                    d * 1e6,
+                    d_trend * 1e6
+                ),
+            );
+        }
+    }
     out
 }
 

@@ -319,8 +319,14 @@ fn round(
     // the delay restart and every candidate that is not a single missed mode; the
     // single-peak missed modes follow only when the joint trial did not pass its F
     // test (it subsumes them). Each wave keeps the order of its jobs.
-    let restart = (!st.model.factor.fit_delay && !st.restart_tested && has(Effect::Delay))
-        .then(|| st.delay_restart.take());
+    // The restart is a fit from the start: it holds none of the effects accepted so far,
+    // so once a step has been accepted it cannot compete with the current model (and it
+    // costs a whole first fit); the incremental `delay` candidate tests the delay then.
+    let restart = (!st.model.factor.fit_delay
+        && !st.restart_tested
+        && st.n_accepted == 0
+        && has(Effect::Delay))
+    .then(|| st.delay_restart.take());
     st.restart_tested |= restart.is_some();
     let joint = has(Effect::MissedMode);
     let (modes, others): (Vec<Proposal>, Vec<Proposal>) = proposals

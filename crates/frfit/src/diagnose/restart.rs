@@ -18,10 +18,9 @@ use crate::pipeline::{chain_fit, err, FitContext, PipelineConfig};
 use crate::summary::RestartSummary;
 use crate::FrfitError;
 use additive_riv::riv::iterate;
-use additive_riv::structure::ResidualStats;
 use additive_riv::{fit_numerators, AdditiveModel, DelayChoice};
 use frf_data::{Fit, ModelStructure};
-use validation::residual::{analyze_residual, Effect};
+use validation::residual::analyze_residual;
 
 /// A fit from the start with the data's delay estimate, and the same restart with the
 /// delay held at the model's value before it.
@@ -141,19 +140,10 @@ pub fn better_first_fit(
     if !an.significant {
         return Ok(unchanged(first));
     }
-    let stats = ResidualStats::new(&first.model, fd);
-    let calls_for_delay = super::candidate::propose(
-        &first.model,
-        &an,
-        &stats,
-        fd,
-        ctx.fs_hz,
-        cfg.alpha,
-        &[],
-        ctx.data_delay_s(),
-    )
-    .iter()
-    .any(|p| p.candidate.effect() == Effect::Delay);
+    // the delay candidates alone: the others' screening is the loop's work
+    let calls_for_delay =
+        !super::candidate::delay_proposals(&first.model, &an, cfg.alpha, &[], ctx.data_delay_s())
+            .is_empty();
     if !calls_for_delay {
         return Ok(unchanged(first));
     }

@@ -59,9 +59,9 @@ pub const SECOND_START: &str = "sk";
 pub const SECOND_START_RESIDUAL: f64 = 3.0;
 
 /// For `frfit fit`: a default chain whose refinement did not converge (its iterations
-/// failed or ran out) started too far from an optimum, and so did one that leaves a
-/// residual more than [`SECOND_START_RESIDUAL`] times the noise (`fit` has no loop to
-/// trace it). The same refiner then runs from the [`SECOND_START`] initialiser, and the
+/// failed, stalled or ran out) started too far from an optimum, and so did one that
+/// leaves a residual more than [`SECOND_START_RESIDUAL`] times the noise (`fit` has no
+/// loop to trace it). The same refiner then runs from the [`SECOND_START`] initialiser, and the
 /// fit with the smaller final prediction error (the weighted cost corrected for the
 /// parameters spent, as between the chains of `--init A,B`) is the first fit. A better
 /// second start is a better first fit, not an effect: the fit's messages and
@@ -88,7 +88,9 @@ fn second_start(
     }
     let converged = !matches!(
         first.fit.convergence,
-        frf_data::Convergence::Failed { .. } | frf_data::Convergence::MaxIterations { .. }
+        frf_data::Convergence::Failed { .. }
+            | frf_data::Convergence::MaxIterations { .. }
+            | frf_data::Convergence::Stalled { .. }
     );
     // `fit` has no loop to trace a residual far above the noise: a start that left it
     // there is poor too

@@ -305,6 +305,12 @@ pub fn print_steps(name: &str, out: &frfit::pipeline::PipelineOutput) {
         "  verdict {}: {}\n  final {:?}, data noise {:?}",
         s.verdict, s.verdict_evidence, s.final_errors, s.data_noise_median_rel
     );
+    let stages: Vec<String> = s
+        .timings
+        .iter()
+        .map(|t| format!("{} {:.2} s", t.stage, t.seconds))
+        .collect();
+    println!("  timings: {}", stages.join("; "));
 }
 
 /// The one accepted second-order `output_dynamics` step of `out`: on output `row`
