@@ -84,6 +84,16 @@ pub struct SplitConfig {
     pub coarse_tol: f64,
     /// Iteration limit of the pole settling of a trial. Default: 15.
     pub coarse_max_iterations: usize,
+    /// A split trial is first settled for this many iterations (a screening); only the
+    /// ones that then lower the cost and leave at most [`SplitConfig::screen_local_ratio`]
+    /// of the neighbourhood's residual are settled to the coarse tolerance. Default: 4.
+    pub screen_iterations: usize,
+    /// The neighbourhood residual fraction a screened split trial may leave and still be
+    /// settled further. Default: 0.6 (a split that will pass the final
+    /// [`SplitConfig::max_local_ratio`] of 0.25 has removed most of the local residual
+    /// within its first iterations; a misfit that is not a pair, such as an unmodelled
+    /// lag, leaves 60 to 90 %).
+    pub screen_local_ratio: f64,
 }
 
 impl Default for SplitConfig {
@@ -104,6 +114,8 @@ impl Default for SplitConfig {
             band_margin: 1.25,
             coarse_tol: 1e-4,
             coarse_max_iterations: 15,
+            screen_iterations: 4,
+            screen_local_ratio: 0.6,
         }
     }
 }
@@ -278,7 +290,11 @@ type Zone = (f64, f64, (usize, usize), f64, f64);
 /// `cfg.over_typical` times the typical mode's neighbourhood is tried (at most
 /// `cfg.max_trials` modes), the largest local residual energy first, with a second mode
 /// at the neighbourhood's largest residual line and one half-width on either side of it
-/// (the trials run in parallel).
+/// (the trials run in parallel). Each trial is screened first: settled for
+/// `cfg.screen_iterations` iterations, it continues to the coarse tolerance only when it
+/// lowers the cost and leaves at most `cfg.screen_local_ratio` of the neighbourhood's
+/// residual (a broadband misfit that raises a few neighbourhoods, an unmodelled lag on
+/// one row say, is not a pair and stops there).
 /// The best trial by cost is kept when the cost falls significantly (F test at
 /// `cfg.alpha`, at least `cfg.min_f`, noise scale from the trial's residual), no two
 /// poles coincide, and the neighbourhood keeps at most `cfg.max_local_ratio` of its
@@ -352,17 +368,30 @@ pub fn split_close_pairs(
         }
         let v0 = cost_of(&cur, data);
         let base = &cur;
-        let trials: Vec<(f64, Option<AdditiveModel>)> = starts
+        // screened: a few iterations first, then the promising trials to the coarse
+        // tolerance (most trials on a misfit that is not a pair stop here)
+        let screen = RivConfig {
+            max_iterations: cfg.screen_iterations.min(coarse.max_iterations),
+            ..coarse.clone()
+        };
+        // (start, settled trial, whether it stopped at the screening)
+        let trials: Vec<(f64, Option<AdditiveModel>, bool)> = starts
             .par_iter()
             .map(|&fs| {
-                (
-                    fs,
-                    settled_with_mode(base, data, fs, 0.5 * zeta.abs().max(2e-3), &coarse),
-                )
+                let zs = 0.5 * zeta.abs().max(2e-3);
+                let Some(t) = settled_with_mode(base, data, fs, zs, &screen) else {
+                    return (fs, None, false);
+                };
+                let j = judge(&t, &cur, v0, data, cfg, (a, b), e0);
+                if j.cost < v0 && j.local <= cfg.screen_local_ratio {
+                    (fs, settle(t, data, &coarse), false)
+                } else {
+                    (fs, Some(t), true)
+                }
             })
             .collect();
         let mut best: Option<(AdditiveModel, f64, f64)> = None;
-        for (fs, t) in trials {
+        for (fs, t, screened) in trials {
             let Some(t) = t else {
                 report.rejected.push((
                     fs,
@@ -391,8 +420,13 @@ pub fn split_close_pairs(
                 report.rejected.push((
                     fs,
                     format!(
-                        "split of {f:.2} Hz: cost {v0:.3e} -> {vt:.3e} (F = {fstat:.1}, needed {fcrit:.1}), {:.0} % of the local residual left",
-                        100.0 * local
+                        "split of {f:.2} Hz: cost {v0:.3e} -> {vt:.3e} (F = {fstat:.1}, needed {fcrit:.1}), {:.0} % of the local residual left{}",
+                        100.0 * local,
+                        if screened {
+                            format!(" after the {} screening iterations", screen.max_iterations)
+                        } else {
+                            String::new()
+                        }
                     ),
                 ));
             }
