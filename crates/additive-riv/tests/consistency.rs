@@ -327,3 +327,36 @@ fn bypass_feedthrough_with_fitted_delay_recovered() {
     );
     assert!(max_rel_param_error(&f.model, &truth) < 1e-8);
 }
+
+/// The numerators of distinct entries are separate problems: the cost of some entries
+/// after their numerator fit ([`additive_riv::numerators::numerator_cost_of_entries`])
+/// is their share of the cost [`fit_numerators`] returns, so a row and the remaining
+/// entries add up to it, with a dynamics factor on one input and noisy data (the
+/// numerators then leave a residual), and every entry gives the whole cost.
+#[test]
+fn numerator_cost_of_entries_adds_up_to_the_whole_fit() {
+    use additive_riv::numerators::numerator_cost_of_entries;
+    use additive_riv::{DynamicsFactor, FactorTarget};
+    let case = random_case(21, 3, 2, 3, true, Domain::Continuous);
+    let data = simulate(&case.truth, &case.freqs, 0.02, 21);
+    let fd = FitData::new(&data, &Weighting::InverseMagnitude).unwrap();
+    let mut start = perturbed_start(&case, 0.01, 21);
+    start
+        .push_dynamics(DynamicsFactor::first_order(FactorTarget::Input(1), 200.0))
+        .unwrap();
+    let whole = fit_numerators(&mut start.clone(), &fd).unwrap();
+    let m = fd.ny * fd.nu;
+    // column 1 (the factor's input: entries ny..2 ny) against the rest
+    let column: Vec<usize> = (fd.ny..2 * fd.ny).collect();
+    let rest: Vec<usize> = (0..m).filter(|e| !column.contains(e)).collect();
+    let c_col = numerator_cost_of_entries(&start, &fd, &column).unwrap();
+    let c_rest = numerator_cost_of_entries(&start, &fd, &rest).unwrap();
+    let c_all = numerator_cost_of_entries(&start, &fd, &(0..m).collect::<Vec<_>>()).unwrap();
+    assert!(c_col > 0.0 && c_rest > 0.0);
+    assert!(
+        ((c_col + c_rest) / whole - 1.0).abs() < 1e-9,
+        "column {c_col:e} + rest {c_rest:e} vs whole {whole:e}"
+    );
+    assert!((c_all / whole - 1.0).abs() < 1e-9, "{c_all:e} vs {whole:e}");
+    assert!(numerator_cost_of_entries(&start, &fd, &[m]).is_err());
+}

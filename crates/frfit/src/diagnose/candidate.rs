@@ -1214,9 +1214,12 @@ fn propose_dynamics(
 /// by the cost after the numerator fit (eq. 24: the submodel numerators are linear given
 /// the poles and the factor, so each point is one convex fit), refined three times on a
 /// 3 x 3 pattern of halving steps around the best (60 fits for order 1, 48 for order
-/// 2). The refit then frees zeros and poles, and the trial's F test of the zeros
-/// against the all-pole refit decides. Returns the twin, the numerator-fit cost of the
-/// all-pole start and the screened one; `None` when nothing could be fitted.
+/// 2); a factor on some rows or columns is scored on their entries alone
+/// ([`additive_riv::numerators::numerator_cost_of_entries`]: the other entries' fits do
+/// not change). The refit then frees zeros and poles, and the trial's F test of the
+/// zeros against the all-pole refit decides. Returns the twin, the numerator-fit cost
+/// of the all-pole start and the screened one (both of every entry); `None` when
+/// nothing could be fitted.
 fn with_numerator(
     model: &AdditiveModel,
     fd: &FitData,
@@ -1235,13 +1238,27 @@ fn with_numerator(
         s.zeros = Some((zero_hz, zero_zeta));
         all_pole.with_start(s)
     };
+    // every point changes the same entries (the factor's row or column): the grid is
+    // scored on those entries alone, the others' share of the cost is the same at every
+    // point
+    let entries = factor_entries(all_pole, fd.ny, fd.nu);
     let cost = |c: &Candidate| -> f64 {
-        match c.augment(model) {
-            Ok(mut m) => additive_riv::fit_numerators(&mut m, fd).unwrap_or(f64::INFINITY),
-            Err(_) => f64::INFINITY,
+        match (c.augment(model), &entries) {
+            (Ok(m), Some(es)) => additive_riv::numerators::numerator_cost_of_entries(&m, fd, es)
+                .unwrap_or(f64::INFINITY),
+            (Ok(mut m), None) => additive_riv::fit_numerators(&mut m, fd).unwrap_or(f64::INFINITY),
+            (Err(_), _) => f64::INFINITY,
         }
     };
     let base = cost(all_pole);
+    // the other entries' share, for the totals the evidence reports
+    let others = match (&entries, all_pole.augment(model)) {
+        (Some(_), Ok(mut m)) => {
+            additive_riv::fit_numerators(&mut m, fd).unwrap_or(f64::INFINITY) - base
+        }
+        (Some(_), Err(_)) => f64::INFINITY,
+        (None, _) => 0.0,
+    };
     let (lo, hi) = NUMERATOR_GRID;
     let n = 6;
     let step = (hi / lo).ln() / (n - 1) as f64;
@@ -1291,9 +1308,36 @@ fn with_numerator(
             best = r;
         }
     }
-    best.0
-        .is_finite()
-        .then(|| (point(best.1, best.2), base, best.0))
+    (best.0.is_finite() && others.is_finite())
+        .then(|| (point(best.1, best.2), base + others, best.0 + others))
+}
+
+/// The entries (column-major indices `j ny + i` of `vec(G)`) that the dynamics-factor
+/// candidate `c` changes, when they are some rows or columns only; `None` when it
+/// changes every entry, the delay, or the model's submodels (a factor that replaces
+/// modes).
+fn factor_entries(c: &Candidate, ny: usize, nu: usize) -> Option<Vec<usize>> {
+    let start = c.factor_start()?;
+    if !start.replaces.is_empty() || start.delay_s.is_some() {
+        return None;
+    }
+    match c {
+        Candidate::InputDynamics { inputs, .. } if inputs.len() < nu => Some(
+            inputs
+                .iter()
+                .filter(|&&j| (1..=nu).contains(&j))
+                .flat_map(|&j| (0..ny).map(move |i| (j - 1) * ny + i))
+                .collect(),
+        ),
+        Candidate::OutputDynamics { outputs, .. } if outputs.len() < ny => Some(
+            outputs
+                .iter()
+                .filter(|&&i| (1..=ny).contains(&i))
+                .flat_map(|&i| (0..nu).map(move |j| j * ny + i - 1))
+                .collect(),
+        ),
+        _ => None,
+    }
 }
 
 /// The span of [`with_numerator`]'s frequency grid, in multiples of the top line: from
