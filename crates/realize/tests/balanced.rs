@@ -161,7 +161,15 @@ proptest! {
         let g_s = stable_part(&m).freq_response(&grid).unwrap();
         let peak = max_sv_grid_difference(&g_s, &ResponseGrid::zeros(grid.len(), m.ny, m.nu)).unwrap();
         let err_ss = max_sv_grid_difference(&g_s, &full.balanced.freq_response(&grid).unwrap()).unwrap();
-        prop_assert!(err_ss <= 1e-10 * peak, "full order: balanced error {err_ss:.3e} of peak {peak:.3e}");
+        // roundoff of the balancing transformation grows with its condition, about the
+        // square root of the HSVs' spread (seed 23979, 3 x 3, 4 modes: spread 1.2e8,
+        // error 1.1e-10 of the peak)
+        let spread = (h[0] / h[h.len() - 1]).sqrt();
+        let tol = 1e-10 * (spread / 1e3).max(1.0);
+        prop_assert!(
+            err_ss <= tol * peak,
+            "full order: balanced error {err_ss:.3e} of peak {peak:.3e} (tolerance {tol:.1e}; HSVs {h:?})"
+        );
         let err = max_sv_difference(&m, &full.model, &grid).unwrap();
         prop_assert!(
             err <= 1e-10 * peak + 2.0 * full.conversion_error && full.conversion_error <= 1e-8 * peak,
