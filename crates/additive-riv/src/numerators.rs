@@ -18,17 +18,7 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
     let nn = lay.n_num;
     let n = data.n;
     let m = data.m();
-    if nn == 0 {
-        return Err(RivError::Structure("the model has no submodels".into()));
-    }
-    if 2 * n < nn {
-        return Err(RivError::TooFewData {
-            observations: 2 * n,
-            lines: n,
-            entries: 1,
-            parameters: nn,
-        });
-    }
+    check_sizes(nn, n)?;
     let basis = Basis::new(model, &lay, &data.omega);
     // Normal equations per entry, formed by one GEMM on the transposed (line-contiguous)
     // regressor and solved by an equilibrated Cholesky: the structure is exploited on
@@ -73,6 +63,23 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
     }
     unpack(model, &lay, &shared, &eta);
     Ok(crate::problem::cost(data, &lay, &basis, &eta, None, &ng))
+}
+
+/// The numerator problem of one entry has `nn` unknowns and `2 n` real equations (`n`
+/// lines): an error when there is nothing to fit or fewer equations than unknowns.
+fn check_sizes(nn: usize, n: usize) -> Result<(), RivError> {
+    if nn == 0 {
+        return Err(RivError::Structure("the model has no submodels".into()));
+    }
+    if 2 * n < nn {
+        return Err(RivError::TooFewData {
+            observations: 2 * n,
+            lines: n,
+            entries: 1,
+            parameters: nn,
+        });
+    }
+    Ok(())
 }
 
 /// The numerators of entry `e` (eq. 24 for that entry alone: the regressor (25) of
@@ -180,17 +187,7 @@ pub fn numerator_cost_of_entries(
     let lay = Layout::of(model);
     let nn = lay.n_num;
     let m = data.m();
-    if nn == 0 {
-        return Err(RivError::Structure("the model has no submodels".into()));
-    }
-    if 2 * data.n < nn {
-        return Err(RivError::TooFewData {
-            observations: 2 * data.n,
-            lines: data.n,
-            entries: 1,
-            parameters: nn,
-        });
-    }
+    check_sizes(nn, data.n)?;
     if let Some(&e) = entries.iter().find(|&&e| e >= m) {
         return Err(RivError::invalid(
             "entries",

@@ -919,21 +919,14 @@ pub fn delay_proposals(
     data_delay_s: Option<f64>,
 ) -> Vec<Proposal> {
     let mut out: Vec<Proposal> = Vec::new();
-    let mut push = |candidate: Candidate, evidence: String| {
-        out.push(Proposal {
-            candidate,
-            evidence,
-        })
-    };
-    let seen = |e: Effect, key: &str| tested.iter().any(|(x, k)| *x == e && k == key);
     if !model.factor.fit_delay && plausible(&an.phase_trend.fit, alpha) {
-        push(
-            Candidate::Delay {
+        out.push(Proposal {
+            candidate: Candidate::Delay {
                 seconds: an.phase_trend.delay_s,
                 start: DelayStart::ResidualSlope,
             },
-            detail(an, Effect::Delay),
-        );
+            evidence: detail(an, Effect::Delay),
+        });
     }
     // The residual's phase slope is biased when the model is far off (modes fitted
     // without the delay absorb part of it); the data's own phase slope, from the delay
@@ -949,20 +942,22 @@ pub fn delay_proposals(
             && an.significant
             && d.abs() > 1e-6
             && (d - d_trend).abs() > 1e-6
-            && !seen(Effect::Delay, "data")
+            && !tested
+                .iter()
+                .any(|(e, k)| *e == Effect::Delay && k == "data")
         {
-            push(
-                Candidate::Delay {
+            out.push(Proposal {
+                candidate: Candidate::Delay {
                     seconds: d,
                     start: DelayStart::DataSlope,
                 },
-                format!(
+                evidence: format!(
                     "phase slope of the data: {:.2} us in all, {:.2} us beyond the model's delay (the residual's slope says {:.2} us)",
                     total * 1e6,
                     d * 1e6,
                     d_trend * 1e6
                 ),
-            );
+            });
         }
     }
     out
