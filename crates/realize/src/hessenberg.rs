@@ -166,6 +166,26 @@ impl HessenbergForm {
         })
     }
 
+    /// `C~ = C Q` (`ny x n`): with `C = I` this is the orthogonal `Q` of `H = Q^T A Q`.
+    pub fn c_tilde(&self) -> faer::Mat<f64> {
+        faer::Mat::from_fn(self.ny, self.n, |i, j| self.c[i * self.n + j])
+    }
+
+    /// The states' response `Z(x) = (x I - H)^{-1} B~` (`n x nu`) at every point, in the
+    /// Hessenberg coordinates `z = Q^T x`, as a grid with `n` "outputs": the model's
+    /// response is `C~ Z(x) + D`. A least squares whose regressor is `C (x I - A)^{-1}`
+    /// can use `Z^T` and solve for `Q^T B` instead: no `n x n` product per point.
+    /// Fails with [`RealizeError::AtPole`] at a pole (`omega` reports `Im x`).
+    pub fn states_at(&self, points: &[C64]) -> Result<crate::ResponseGrid, RealizeError> {
+        grid_of(
+            self,
+            points.iter().copied(),
+            |k| points[k].im,
+            (self.n, self.nu),
+            HessenbergForm::states_into,
+        )
+    }
+
     /// Number of states.
     pub fn n_states(&self) -> usize {
         self.n
@@ -195,49 +215,12 @@ impl HessenbergForm {
             return Ok(());
         }
         self.factor(x, work)?;
-        let HessenbergWork {
-            m_re,
-            m_im,
-            inv_piv,
-            mult,
-            swap,
-            x_re,
-            x_im,
-        } = work;
         if nu <= ny {
             // Columns: (xI - H) X = B~, then G += C~ X.
-            x_re.clear();
-            x_re.extend_from_slice(&self.bt);
-            x_im.clear();
-            x_im.resize(nu * n, 0.0);
+            self.solve_columns(work);
+            let (xr_all, xi_all) = (&work.x_re, &work.x_im);
             for j in 0..nu {
-                let (xr, xi) = (&mut x_re[j * n..(j + 1) * n], &mut x_im[j * n..(j + 1) * n]);
-                for k in 0..n - 1 {
-                    if swap[k] {
-                        xr.swap(k, k + 1);
-                        xi.swap(k, k + 1);
-                    }
-                    let l = mult[k];
-                    let (tr, ti) = (xr[k], xi[k]);
-                    xr[k + 1] -= l.re * tr - l.im * ti;
-                    xi[k + 1] -= l.re * ti + l.im * tr;
-                }
-                for k in (0..n).rev() {
-                    let (ur, ui) = (
-                        &m_re[k * n + k + 1..(k + 1) * n],
-                        &m_im[k * n + k + 1..(k + 1) * n],
-                    );
-                    let (vr, vi) = (&xr[k + 1..], &xi[k + 1..]);
-                    let mut sr = 0.0;
-                    let mut si = 0.0;
-                    for q in 0..ur.len() {
-                        sr += ur[q] * vr[q] - ui[q] * vi[q];
-                        si += ur[q] * vi[q] + ui[q] * vr[q];
-                    }
-                    let t = C64::new(xr[k] - sr, xi[k] - si) * inv_piv[k];
-                    xr[k] = t.re;
-                    xi[k] = t.im;
-                }
+                let (xr, xi) = (&xr_all[j * n..(j + 1) * n], &xi_all[j * n..(j + 1) * n]);
                 for i in 0..ny {
                     let crow = &self.c[i * n..(i + 1) * n];
                     let (mut sr, mut si) = (0.0, 0.0);
@@ -250,6 +233,15 @@ impl HessenbergForm {
             }
         } else {
             // Rows: Y (xI - H) = C~, i.e. Y = (C~ U^-1) E, then G += Y B~.
+            let HessenbergWork {
+                m_re,
+                m_im,
+                inv_piv,
+                mult,
+                swap,
+                x_re,
+                x_im,
+            } = work;
             x_re.clear();
             x_re.extend_from_slice(&self.c);
             x_im.clear();
@@ -297,6 +289,80 @@ impl HessenbergForm {
             Ok(())
         } else {
             Err(Singular)
+        }
+    }
+
+    /// `(x I - H)^{-1} B~` (`n x nu`, column-major) into `out`: the response of the
+    /// states in the Hessenberg coordinates `z = Q^T x` (so that `G(x) = C~ Z + D`).
+    /// Fails as [`eval_into`](Self::eval_into) does at a pole.
+    pub(crate) fn states_into(
+        &self,
+        x: C64,
+        work: &mut HessenbergWork,
+        out: &mut [C64],
+    ) -> Result<(), Singular> {
+        let n = self.n;
+        debug_assert_eq!(out.len(), n * self.nu);
+        if n == 0 || self.nu == 0 {
+            return Ok(());
+        }
+        self.factor(x, work)?;
+        self.solve_columns(work);
+        for (o, (&re, &im)) in out.iter_mut().zip(work.x_re.iter().zip(&work.x_im)) {
+            *o = C64::new(re, im);
+        }
+        if out.iter().all(|v| v.re.is_finite() && v.im.is_finite()) {
+            Ok(())
+        } else {
+            Err(Singular)
+        }
+    }
+
+    /// Solves `(x I - H) X = B~` with the factors in `work` (from [`factor`](Self::factor)),
+    /// column after column, into `work.x_re` / `work.x_im` (`n` entries per column).
+    fn solve_columns(&self, work: &mut HessenbergWork) {
+        let (n, nu) = (self.n, self.nu);
+        let HessenbergWork {
+            m_re,
+            m_im,
+            inv_piv,
+            mult,
+            swap,
+            x_re,
+            x_im,
+        } = work;
+        x_re.clear();
+        x_re.extend_from_slice(&self.bt);
+        x_im.clear();
+        x_im.resize(nu * n, 0.0);
+        for j in 0..nu {
+            let (xr, xi) = (&mut x_re[j * n..(j + 1) * n], &mut x_im[j * n..(j + 1) * n]);
+            for k in 0..n - 1 {
+                if swap[k] {
+                    xr.swap(k, k + 1);
+                    xi.swap(k, k + 1);
+                }
+                let l = mult[k];
+                let (tr, ti) = (xr[k], xi[k]);
+                xr[k + 1] -= l.re * tr - l.im * ti;
+                xi[k + 1] -= l.re * ti + l.im * tr;
+            }
+            for k in (0..n).rev() {
+                let (ur, ui) = (
+                    &m_re[k * n + k + 1..(k + 1) * n],
+                    &m_im[k * n + k + 1..(k + 1) * n],
+                );
+                let (vr, vi) = (&xr[k + 1..], &xi[k + 1..]);
+                let mut sr = 0.0;
+                let mut si = 0.0;
+                for q in 0..ur.len() {
+                    sr += ur[q] * vr[q] - ui[q] * vi[q];
+                    si += ur[q] * vi[q] + ui[q] * vr[q];
+                }
+                let t = C64::new(xr[k] - sr, xi[k] - si) * inv_piv[k];
+                xr[k] = t.re;
+                xi[k] = t.im;
+            }
         }
     }
 
@@ -370,8 +436,26 @@ pub(crate) fn eval_grid(
     points: impl ExactSizeIterator<Item = C64>,
     omega_of: impl Fn(usize) -> f64 + Sync,
 ) -> Result<crate::ResponseGrid, RealizeError> {
+    grid_of(
+        hf,
+        points,
+        omega_of,
+        (hf.ny, hf.nu),
+        HessenbergForm::eval_into,
+    )
+}
+
+/// The grid of `eval(hf, x, work, out)` at every point (each an `rows x cols` matrix,
+/// column-major), as [`eval_grid`] describes.
+fn grid_of(
+    hf: &HessenbergForm,
+    points: impl ExactSizeIterator<Item = C64>,
+    omega_of: impl Fn(usize) -> f64 + Sync,
+    (rows, cols): (usize, usize),
+    eval: impl Fn(&HessenbergForm, C64, &mut HessenbergWork, &mut [C64]) -> Result<(), Singular> + Sync,
+) -> Result<crate::ResponseGrid, RealizeError> {
     let pts: Vec<C64> = points.collect();
-    let mut g = crate::ResponseGrid::zeros(pts.len(), hf.ny, hf.nu);
+    let mut g = crate::ResponseGrid::zeros(pts.len(), rows, cols);
     if let Some(k) = pts
         .iter()
         .position(|x| !(x.re.is_finite() && x.im.is_finite()))
@@ -380,7 +464,7 @@ pub(crate) fn eval_grid(
             what: format!("evaluation point {k}"),
         });
     }
-    let m = hf.ny * hf.nu;
+    let m = rows * cols;
     // about n^2 (nu + 1) flops per point: blocks only where the work is worth a thread
     let work_per_point = hf.n * hf.n * (hf.nu + 1);
     let block = if m == 0 || work_per_point * pts.len() < PARALLEL_WORK {
@@ -392,11 +476,10 @@ pub(crate) fn eval_grid(
         let mut work = HessenbergWork::default();
         for (i, line) in out.chunks_mut(m.max(1)).enumerate() {
             let k = b * block + i;
-            hf.eval_into(pts[k], &mut work, line)
-                .map_err(|Singular| RealizeError::AtPole {
-                    point: k,
-                    omega: omega_of(k),
-                })?;
+            eval(hf, pts[k], &mut work, line).map_err(|Singular| RealizeError::AtPole {
+                point: k,
+                omega: omega_of(k),
+            })?;
         }
         Ok(())
     };

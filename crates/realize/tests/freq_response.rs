@@ -201,6 +201,74 @@ fn random_dense_models_match_dense_lu_on_both_solve_sides() {
     }
 }
 
+/// The states' response in the Hessenberg coordinates, mapped back with `C~ = C Q`,
+/// is the model's response: `C~ Z(x) + D = G(x)`; with `C = I`, `C~` is orthogonal
+/// and `Q Z(x)` is `(x I - A)^{-1} B` itself.
+#[test]
+fn states_in_hessenberg_coordinates_give_the_response() {
+    let mut r = rng(33);
+    for &(n, ny, nu) in &[(1, 1, 1), (9, 3, 2), (16, 2, 5), (40, 40, 8)] {
+        let a = Mat::from_fn(n, n, |_, _| gauss(&mut r));
+        let b = Mat::from_fn(n, nu, |_, _| gauss(&mut r));
+        let c = if ny == n {
+            Mat::identity(n, n)
+        } else {
+            Mat::from_fn(ny, n, |_, _| gauss(&mut r))
+        };
+        let d = Mat::from_fn(ny, nu, |_, _| gauss(&mut r));
+        let m = ss(a, b, c, d);
+        let hf = m.hessenberg().unwrap();
+        let ct = hf.c_tilde();
+        if ny == n {
+            let qtq = ct.transpose() * &ct;
+            for i in 0..n {
+                for j in 0..n {
+                    let want = if i == j { 1.0 } else { 0.0 };
+                    assert!((qtq[(i, j)] - want).abs() < 1e-12, "Q^T Q ({i}, {j})");
+                }
+            }
+        }
+        let points: Vec<C64> = (0..20)
+            .map(|_| C64::new(gauss(&mut r), 3.0 * gauss(&mut r)))
+            .collect();
+        let z = hf.states_at(&points).unwrap();
+        assert_eq!((z.ny, z.nu, z.len()), (n, nu, points.len()));
+        for (k, &x) in points.iter().enumerate() {
+            let want = dense_reference(&m, x);
+            let scale = (0..ny)
+                .flat_map(|i| (0..nu).map(move |j| (i, j)))
+                .map(|(i, j)| want[(i, j)].norm())
+                .fold(0.0, f64::max);
+            for i in 0..ny {
+                for j in 0..nu {
+                    let mut g = C64::new(m.d[(i, j)], 0.0);
+                    for l in 0..n {
+                        g += z.get(k, l, j) * ct[(i, l)];
+                    }
+                    let e = (g - want[(i, j)]).norm() / scale;
+                    assert!(e < 1e-10, "n = {n}, {ny}x{nu}, point {k}: {e:e}");
+                }
+            }
+        }
+    }
+    // a pole is an error, not a NaN
+    let m = ss(
+        Mat::from_fn(1, 1, |_, _| 0.0),
+        Mat::from_fn(1, 1, |_, _| 1.0),
+        Mat::from_fn(1, 1, |_, _| 1.0),
+        Mat::from_fn(1, 1, |_, _| 0.0),
+    );
+    let err = m
+        .hessenberg()
+        .unwrap()
+        .states_at(&[C64::new(0.0, 1.0), C64::new(0.0, 0.0)])
+        .unwrap_err();
+    assert!(
+        matches!(err, RealizeError::AtPole { point: 1, .. }),
+        "{err}"
+    );
+}
+
 #[test]
 fn modal_and_state_space_responses_agree_for_wide_and_tall_systems() {
     for (seed, ny, nu) in [(1, 4, 13), (2, 13, 4), (3, 1, 1), (4, 3, 3)] {

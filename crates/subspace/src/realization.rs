@@ -52,7 +52,10 @@ pub fn fit_b_d(
 ) -> Result<(Mat<f64>, Mat<f64>, f64, f64), SubspaceError> {
     let (p, nu, nl, n) = (d.ny, d.nu, d.n_lines(), a.nrows());
     // Phi_k = C (xi_k I - A)^{-1} (p x n), Hessenberg evaluation (defective A is fine),
-    // as the transpose (xi_k I - A^T)^{-1} C^T: p right-hand sides per line, not n
+    // as the transpose (xi_k I - A^T)^{-1} C^T: p right-hand sides per line, not n. With
+    // A^T = Q H Q^T, Phi_k = Z_k^T Q^T for Z_k = (xi_k I - H)^{-1} Q^T C^T: the least
+    // squares is solved for B' = Q^T B with the regressor Z_k^T, and B = Q B' at the end
+    // (no n x n product per line; Q is orthogonal, so the problem is the same).
     let ss = StateSpace::new(
         a.transpose().to_owned(),
         c.transpose().to_owned(),
@@ -60,8 +63,10 @@ pub fn fit_b_d(
         Mat::zeros(n, p),
         TimeDomain::Discrete { ts: 1.0 },
     )?;
-    let phi_t = ss.freq_response_at(&d.xi)?;
-    let phi = |k: usize, o: usize, l: usize| phi_t.get(k, l, o);
+    let hf = ss.hessenberg()?;
+    let q = hf.c_tilde();
+    let z = hf.states_at(&d.xi)?;
+    let phi = |k: usize, o: usize, l: usize| z.get(k, l, o);
     let mut b = Mat::<f64>::zeros(n, nu);
     let mut dd = Mat::<f64>::zeros(p, nu);
     let mut worst = 1.0f64;
@@ -177,6 +182,8 @@ pub fn fit_b_d(
             cost += col2 * grp.scales[c];
         }
     }
+    // B = Q B'
+    let b = &q * &b;
     if (0..nu).any(|j| (0..n).any(|l| !b[(l, j)].is_finite())) {
         return Err(SubspaceError::numerical(
             "least squares (17) for B and D",

@@ -294,38 +294,11 @@ fn stencil_ratios(
     let f = data.freqs_hz();
     let values = data.values_vec();
     let var = &noise.variance;
-    // resonance peaks of each entry: a local maximum of the magnitude over +-guard lines
-    // that stands above both lines at +-guard by 10 % and by 4 declared standard
-    // deviations (a maximum of the jitter alone rarely does)
-    let g = cfg.peak_guard;
-    let mut near_peak = vec![false; n * m];
-    if g > 0 && n > 2 * g {
-        for e in 0..m {
-            let mag = |j: usize| values[j * m + e].norm();
-            for k in g..n - g {
-                let a = mag(k);
-                let is_max = (k - g..=k + g).all(|j| j == k || mag(j) < a);
-                let stands = [k - g, k + g].iter().all(|&j| {
-                    let drop = a - mag(j);
-                    drop > 0.1 * a && drop > 4.0 * (var[k * m + e] + var[j * m + e]).sqrt()
-                });
-                if is_max && stands {
-                    for flag in near_peak[(k - g) * m + e..=(k + g) * m + e]
-                        .iter_mut()
-                        .step_by(m)
-                    {
-                        *flag = true;
-                    }
-                }
-            }
-        }
-    }
-    let mut coef = vec![0.0; p + 1];
+    // the difference coefficients of every stencil (they depend on the frequencies only)
     let ns = n - p;
-    let mut r = vec![f64::NAN; ns * m];
-    let mut excluded = 0usize;
-    for start in 0..n - p {
-        if !difference_coefficients(&f[start..start + p + 1], &mut coef) {
+    let mut coefs = vec![0.0; ns * (p + 1)];
+    for (start, c) in coefs.chunks_mut(p + 1).enumerate() {
+        if !difference_coefficients(&f[start..start + p + 1], c) {
             return Err(ValidationError::invalid_input(
                 "data",
                 format!(
@@ -335,22 +308,72 @@ fn stencil_ratios(
                 ),
             ));
         }
-        for e in 0..m {
-            if (start..=start + p).any(|j| near_peak[j * m + e]) {
-                excluded += 1;
-                continue;
-            }
-            let mut d = C64::new(0.0, 0.0);
-            let mut v = 0.0;
-            for (l, c) in coef.iter().enumerate() {
-                d += values[(start + l) * m + e] * *c;
-                v += c * c * var[(start + l) * m + e];
-            }
-            if v > 0.0 && v.is_finite() && d.re.is_finite() && d.im.is_finite() {
-                r[e * ns + start] = d.norm_sqr() / v;
-            }
-        }
     }
+    // The entries are independent: blocks of them run in parallel, each gathering its
+    // columns once, line after line (contiguous reads of the line-major data), then
+    // working entry by entry on its own column.
+    const BLOCK: usize = 8;
+    let g = cfg.peak_guard;
+    let mut r = vec![f64::NAN; ns * m];
+    let excluded: usize = r
+        .par_chunks_mut(BLOCK * ns)
+        .enumerate()
+        .map(|(b, rb)| {
+            let (e0, nb) = (b * BLOCK, rb.len() / ns);
+            let mut vals = vec![C64::new(0.0, 0.0); nb * n];
+            let mut vars = vec![0.0; nb * n];
+            for k in 0..n {
+                for eb in 0..nb {
+                    vals[eb * n + k] = values[k * m + e0 + eb];
+                    vars[eb * n + k] = var[k * m + e0 + eb];
+                }
+            }
+            let mut mag = vec![0.0; n];
+            let mut near_peak = vec![false; n];
+            let mut excluded = 0usize;
+            for (eb, out) in rb.chunks_mut(ns).enumerate() {
+                let (val, vr) = (&vals[eb * n..(eb + 1) * n], &vars[eb * n..(eb + 1) * n]);
+                for (a, v) in mag.iter_mut().zip(val) {
+                    *a = v.norm();
+                }
+                // resonance peaks of the entry: a local maximum of the magnitude over
+                // +-guard lines that stands above both lines at +-guard by 10 % and by 4
+                // declared standard deviations (a maximum of the jitter alone rarely does)
+                near_peak.fill(false);
+                if g > 0 && n > 2 * g {
+                    for k in g..n - g {
+                        let a = mag[k];
+                        let is_max = (k - g..=k + g).all(|j| j == k || mag[j] < a);
+                        let stands = is_max
+                            && [k - g, k + g].iter().all(|&j| {
+                                let drop = a - mag[j];
+                                drop > 0.1 * a && drop > 4.0 * (vr[k] + vr[j]).sqrt()
+                            });
+                        if stands {
+                            near_peak[k - g..=k + g].fill(true);
+                        }
+                    }
+                }
+                for (start, r) in out.iter_mut().enumerate() {
+                    if near_peak[start..=start + p].iter().any(|&x| x) {
+                        excluded += 1;
+                        continue;
+                    }
+                    let mut d = C64::new(0.0, 0.0);
+                    let mut v = 0.0;
+                    let c = &coefs[start * (p + 1)..(start + 1) * (p + 1)];
+                    for (l, c) in c.iter().enumerate() {
+                        d += val[start + l] * *c;
+                        v += c * c * vr[start + l];
+                    }
+                    if v > 0.0 && v.is_finite() && d.re.is_finite() && d.im.is_finite() {
+                        *r = d.norm_sqr() / v;
+                    }
+                }
+            }
+            excluded
+        })
+        .sum();
     Ok((r, excluded))
 }
 

@@ -77,6 +77,7 @@ use crate::stats::{
 use crate::ValidationError;
 use frf_data::cmif::PeakConfig;
 use frf_data::{FrfDataset, C64};
+use rayon::prelude::*;
 use realize::ResponseGrid;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
@@ -528,11 +529,12 @@ impl Residual {
         }
         let weight = floored_weights(&noise.variance, n, m, ny, cfg.variance_floor)?;
         let error: Vec<C64> = values
-            .iter()
+            .par_iter()
             .zip(&model.values)
             .map(|(g, p)| g - p)
             .collect();
         let line_stat: Vec<f64> = (0..n)
+            .into_par_iter()
             .map(|k| {
                 (0..m)
                     .map(|e| error[k * m + e].norm_sqr() * weight[k * m + e])
@@ -543,6 +545,7 @@ impl Residual {
         let window = local_window(&freq_hz, cfg);
         let local_level = running_median_bounded(&line_stat, &window.0, &window.1);
         let rho: Vec<f64> = (0..n)
+            .into_par_iter()
             .map(|k| {
                 let pp: f64 = (k * m..(k + 1) * m)
                     .map(|i| model.values[i].norm_sqr() * weight[i])
@@ -743,13 +746,29 @@ fn floored_weights(
     ny: usize,
     rel: f64,
 ) -> Result<Vec<f64>, ValidationError> {
+    // the median and maximum of every entry's variances: blocks of entries in parallel,
+    // each gathering its columns line after line (contiguous reads)
+    const BLOCK: usize = 8;
+    let stats: Vec<(f64, f64)> = (0..m.div_ceil(BLOCK))
+        .into_par_iter()
+        .flat_map_iter(|b| {
+            let (e0, nb) = (b * BLOCK, BLOCK.min(m - b * BLOCK));
+            let mut cols = vec![0.0; nb * n];
+            for k in 0..n {
+                for eb in 0..nb {
+                    cols[eb * n + k] = var[k * m + e0 + eb];
+                }
+            }
+            cols.chunks_mut(n.max(1))
+                .map(|col| {
+                    let max = col.iter().copied().fold(0.0, f64::max);
+                    (crate::stats::median_mut(col), max)
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
     let mut floors = vec![0.0; m];
-    let mut col = Vec::with_capacity(n);
-    for (e, fl) in floors.iter_mut().enumerate() {
-        col.clear();
-        col.extend((0..n).map(|k| var[k * m + e]));
-        let med = crate::stats::median_mut(&mut col);
-        let max = col.iter().copied().fold(0.0, f64::max);
+    for (e, (fl, &(med, max))) in floors.iter_mut().zip(&stats).enumerate() {
         if max <= 0.0 {
             return Err(ValidationError::invalid_input(
                 "noise level",
@@ -763,11 +782,15 @@ fn floored_weights(
         // With a zero median, floor relative to the largest variance instead.
         *fl = if med > 0.0 { rel * med } else { rel * max };
     }
-    Ok(var
-        .iter()
-        .enumerate()
-        .map(|(idx, v)| 1.0 / v.max(floors[idx % m]).max(f64::MIN_POSITIVE))
-        .collect())
+    let mut w = vec![0.0; var.len()];
+    w.par_chunks_mut(m.max(1))
+        .zip(var.par_chunks(m.max(1)))
+        .for_each(|(w, v)| {
+            for ((w, v), fl) in w.iter_mut().zip(v).zip(&floors) {
+                *w = 1.0 / v.max(*fl).max(f64::MIN_POSITIVE);
+            }
+        });
+    Ok(w)
 }
 
 /// The calibration and the two tests of the module documentation. Returns the null

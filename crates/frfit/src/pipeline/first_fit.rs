@@ -250,7 +250,12 @@ pub fn chain_fit(
         timings: result
             .links
             .iter()
-            .flat_map(|l| l.timings.clone())
+            .flat_map(|l| {
+                l.timings.iter().map(|t| frf_data::Timing {
+                    stage: format!("{}: {}", l.link, t.stage),
+                    seconds: t.seconds,
+                })
+            })
             .chain(
                 result
                     .model

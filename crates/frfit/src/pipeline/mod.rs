@@ -309,6 +309,13 @@ pub fn run(
         },
         t,
     );
+    // the first fit's own stages (per link of the chain), under the `fit` stage
+    for st in &fit.timings {
+        timings.0.push(StageTime {
+            stage: format!("  fit / {}", st.stage),
+            seconds: st.seconds,
+        });
+    }
     // a restart that ends significantly better is a better first fit, not an effect
     let Restarted {
         fit,

@@ -60,25 +60,6 @@ pub(crate) fn error_stats(data: &Frf, response: &ResponseGrid, noise: &NoiseLeve
     }
 }
 
-/// Median of `sqrt(var) / |G|`: the data's own relative noise level.
-fn data_noise_rel(data: &Frf, noise: &NoiseLevel) -> Option<f64> {
-    let m = data.n_entries();
-    let mut v: Vec<f64> = (0..data.n_lines())
-        .flat_map(|k| {
-            let g = data.line(k);
-            (0..m).filter_map(move |e| {
-                let a = g[e].norm();
-                (a > 0.0).then(|| noise.variance[k * m + e].sqrt() / a)
-            })
-        })
-        .collect();
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    Some(v[v.len() / 2])
-}
-
 fn mode_summaries(model: &AdditiveModel) -> Vec<ModeSummary> {
     let mut v: Vec<ModeSummary> = model
         .modes()
@@ -436,8 +417,8 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
         final_model: final_model_summary(run.fit),
         final_errors: run.final_errors,
         data_noise_median_rel: matches!(noise.source, NoiseSource::Measured)
-            .then(|| data_noise_rel(band, noise))
-            .flatten(),
+            .then_some(run.analysis.median_noise_rel)
+            .filter(|v| v.is_finite()),
         timings: run.timings,
         chain: run.chain,
         chain_runs: run.chain_runs,
