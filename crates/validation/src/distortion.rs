@@ -170,6 +170,35 @@ pub fn floor_noise(
     cfg: &LineFloorConfig,
     half_window: usize,
 ) -> Result<NoiseLevel, ValidationError> {
+    check_half_window(half_window)?;
+    let (r, _) = stencil_ratios(data, declared, cfg)?;
+    Ok(noise_from_ratios(
+        &r,
+        data,
+        declared,
+        cfg.order,
+        half_window,
+    ))
+}
+
+/// [`line_floor`] and [`floor_noise`] of the same data, from one computation of the
+/// stencils (the costly part at many entries).
+///
+/// Errors: those of [`floor_noise`].
+pub fn line_floor_and_noise(
+    data: &(impl FrfDataset + ?Sized),
+    declared: &NoiseLevel,
+    cfg: &LineFloorConfig,
+    half_window: usize,
+) -> Result<(LineFloor, NoiseLevel), ValidationError> {
+    check_half_window(half_window)?;
+    let (r, excluded) = stencil_ratios(data, declared, cfg)?;
+    let floor_noise = noise_from_ratios(&r, data, declared, cfg.order, half_window);
+    let floor = floor_from_ratios(r, excluded, data, declared, cfg)?;
+    Ok((floor, floor_noise))
+}
+
+fn check_half_window(half_window: usize) -> Result<(), ValidationError> {
     if half_window == 0 {
         return Err(ValidationError::config(
             "floor half_window",
@@ -177,9 +206,19 @@ pub fn floor_noise(
             "the window needs at least one line on each side",
         ));
     }
-    let (r, _) = stencil_ratios(data, declared, cfg)?;
+    Ok(())
+}
+
+/// The noise level of [`floor_noise`] from the stencil ratios `r` of
+/// [`stencil_ratios`].
+fn noise_from_ratios(
+    r: &[f64],
+    data: &(impl FrfDataset + ?Sized),
+    declared: &NoiseLevel,
+    p: usize,
+    half_window: usize,
+) -> NoiseLevel {
     let (n, m) = (data.n_lines(), data.n_entries());
-    let p = cfg.order;
     let ns = n - p;
     // the ratio of every entry at every line, `[e * n + k]`: the entries are independent
     // (a median per line over the window), so they run in parallel
@@ -212,12 +251,15 @@ pub fn floor_noise(
             }
         });
     let mut variance = declared.variance.clone();
-    for (k, v) in variance.chunks_mut(m).enumerate() {
-        for (e, v) in v.iter_mut().enumerate() {
-            *v *= ratios[e * n + k];
-        }
-    }
-    Ok(NoiseLevel {
+    variance
+        .par_chunks_mut(m.max(1))
+        .enumerate()
+        .for_each(|(k, v)| {
+            for (e, v) in v.iter_mut().enumerate() {
+                *v *= ratios[e * n + k];
+            }
+        });
+    NoiseLevel {
         variance,
         source: NoiseSource::Estimated {
             method: format!(
@@ -226,7 +268,7 @@ pub fn floor_noise(
         },
         ny: declared.ny,
         nu: declared.nu,
-    })
+    }
 }
 
 /// The values of a sliding window in order (NaN left out), for its running median: one
@@ -389,6 +431,17 @@ pub fn line_floor(
     cfg: &LineFloorConfig,
 ) -> Result<LineFloor, ValidationError> {
     let (all, excluded) = stencil_ratios(data, noise, cfg)?;
+    floor_from_ratios(all, excluded, data, noise, cfg)
+}
+
+/// The [`LineFloor`] from the stencil ratios of [`stencil_ratios`].
+fn floor_from_ratios(
+    all: Vec<f64>,
+    excluded: usize,
+    data: &(impl FrfDataset + ?Sized),
+    noise: &NoiseLevel,
+    cfg: &LineFloorConfig,
+) -> Result<LineFloor, ValidationError> {
     let p = cfg.order;
     let mut r: Vec<f64> = all.into_iter().filter(|x| !x.is_nan()).collect();
     if r.is_empty() {
@@ -622,6 +675,19 @@ mod tests {
         assert!(lo < 1.3, "without: {lo}");
         assert!((hi / 9.0 - 1.0).abs() < 0.25, "with 1 + 8: {hi}");
         assert!(floor_noise(&mixed, &declared, &LineFloorConfig::default(), 0).is_err());
+    }
+
+    #[test]
+    fn floor_and_noise_together_equal_the_two_apart() {
+        for (x, seed) in [(0.0, 1), (3.0, 2)] {
+            let d = data(600, 1e-3, x, None, seed);
+            let noise = noise_level(&d).unwrap();
+            let cfg = LineFloorConfig::default();
+            let (fl, fnoise) = line_floor_and_noise(&d, &noise, &cfg, 20).unwrap();
+            assert_eq!(fl, line_floor(&d, &noise, &cfg).unwrap());
+            assert_eq!(fnoise, floor_noise(&d, &noise, &cfg, 20).unwrap());
+            assert!(line_floor_and_noise(&d, &noise, &cfg, 0).is_err());
+        }
     }
 
     #[test]

@@ -454,40 +454,56 @@ pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
         y[i] = p.norm_sqr() * res.weight[i];
     }
     let omega = &res.omega;
-    let mut num = vec![0.0; m];
-    let mut den = vec![0.0; m];
-    let mut eval = |f0: f64, zeta: f64, gains: Option<&mut Vec<f64>>| -> f64 {
+    // the entries are independent: chunks of them run in parallel, each summing over
+    // the lines in order (the same sums as one serial pass)
+    const CHUNK: usize = 256;
+    let eval = |f0: f64, zeta: f64, gains: Option<(&mut Vec<f64>, &mut Vec<f64>)>| -> f64 {
         let w0 = TAU * f0;
         let kmax = omega.partition_point(|w| *w < 100.0 * w0);
-        num.iter_mut().for_each(|v| *v = 0.0);
-        den.iter_mut().for_each(|v| *v = 0.0);
-        for k in 0..kmax {
-            let s = C64::new(0.0, omega[k]);
-            let a = C64::new(w0 * w0, 0.0) + s * (2.0 * zeta * w0);
-            let q = -a / (s * s + a);
-            let q2 = q.norm_sqr();
-            let (xrs, xis) = (&xr[k * m..(k + 1) * m], &xi[k * m..(k + 1) * m]);
-            let ys = &y[k * m..(k + 1) * m];
-            for (((nu_e, de), (r, i)), yy) in num
-                .iter_mut()
-                .zip(den.iter_mut())
-                .zip(xrs.iter().zip(xis))
-                .zip(ys)
-            {
-                // Re(conj(q) x) = q.re x.re + q.im x.im
-                *nu_e += q.re * r + q.im * i;
-                *de += q2 * yy;
-            }
-        }
+        let q: Vec<C64> = omega[..kmax]
+            .iter()
+            .map(|&w| {
+                let s = C64::new(0.0, w);
+                let a = C64::new(w0 * w0, 0.0) + s * (2.0 * zeta * w0);
+                -a / (s * s + a)
+            })
+            .collect();
+        let parts: Vec<(Vec<f64>, Vec<f64>)> = (0..m.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let (e0, e1) = (c * CHUNK, ((c + 1) * CHUNK).min(m));
+                let mut num = vec![0.0; e1 - e0];
+                let mut den = vec![0.0; e1 - e0];
+                for (k, q) in q.iter().enumerate() {
+                    let q2 = q.norm_sqr();
+                    let (lo, hi) = (k * m + e0, k * m + e1);
+                    let (xrs, xis, ys) = (&xr[lo..hi], &xi[lo..hi], &y[lo..hi]);
+                    for (((nu_e, de), (r, i)), yy) in num
+                        .iter_mut()
+                        .zip(den.iter_mut())
+                        .zip(xrs.iter().zip(xis))
+                        .zip(ys)
+                    {
+                        // Re(conj(q) x) = q.re x.re + q.im x.im
+                        *nu_e += q.re * r + q.im * i;
+                        *de += q2 * yy;
+                    }
+                }
+                (num, den)
+            })
+            .collect();
+        let num: Vec<f64> = parts.iter().flat_map(|(n, _)| n.iter().copied()).collect();
+        let den: Vec<f64> = parts.iter().flat_map(|(_, d)| d.iter().copied()).collect();
         let mut total = 0.0;
         for e in 0..m {
             if den[e] > 0.0 {
                 total += num[e] * num[e] / den[e];
             }
         }
-        if let Some(g) = gains {
+        if let Some((g, d)) = gains {
             g.clear();
             g.extend((0..m).map(|e| if den[e] > 0.0 { num[e] / den[e] } else { 0.0 }));
+            *d = den;
         }
         total
     };
@@ -527,8 +543,8 @@ pub fn stiffness_signature(res: &Residual) -> StiffnessSignature {
     if eval(f_hz, cand, None) > eval(f_hz, zeta, None) {
         zeta = cand;
     }
-    let mut gains = Vec::with_capacity(m);
-    let explained = eval(f_hz, zeta, Some(&mut gains));
+    let (mut gains, mut den) = (Vec::with_capacity(m), Vec::new());
+    let explained = eval(f_hz, zeta, Some((&mut gains, &mut den)));
     let (mut gw, mut sw) = (0.0, 0.0);
     for e in 0..m {
         gw += gains[e] * den[e];

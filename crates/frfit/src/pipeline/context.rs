@@ -14,7 +14,7 @@ use frf_data::delay::{estimate_delay, DelayEstimate};
 use frf_data::{Frf, FrfDataset, ProgressSink, Weighting};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
-use validation::distortion::{floor_noise, line_floor, LineFloor, LineFloorConfig};
+use validation::distortion::{line_floor_and_noise, LineFloor, LineFloorConfig};
 use validation::noise::{noise_level, NoiseLevel, NoiseSource};
 use validation::residual::ResidualConfig;
 
@@ -49,11 +49,9 @@ pub struct FitContext {
     /// estimated noise level is this floor already) or the floor cannot be formed.
     pub line_floor: Option<LineFloor>,
     /// The measured variance raised to the local line-to-line floor
-    /// ([`validation::distortion::floor_noise`]) when the floor significantly exceeds
-    /// the measured variance (nonlinear distortion that the variance misses); `None`
-    /// otherwise. The diagnosis loop judges the residual against it, see
-    /// [`judging_noise`](Self::judging_noise).
-    pub distortion_noise: Option<NoiseLevel>,
+    /// ([`validation::distortion::floor_noise`]), with [`line_floor`](Self::line_floor);
+    /// see [`distortion_noise`](Self::distortion_noise).
+    pub floor_noise: Option<NoiseLevel>,
     /// CMIF of the band, computed on first use ([`cmif`](Self::cmif)): the CMIF start and
     /// the report read it, a subspace start does not (at 50 x 50 entries it costs
     /// seconds and hundreds of MB).
@@ -107,26 +105,33 @@ impl FitContext {
         let decl: Declared = declared(data);
         let fs_hz = cfg.fs_hz.or(decl.fs_hz);
         let noise = noise_level(&band).map_err(err("noise level"))?;
-        let line_floor = matches!(noise.source, NoiseSource::Measured)
-            .then(|| line_floor(&band, &noise, &LineFloorConfig::default()).ok())
-            .flatten();
-        let distortion_noise = match &line_floor {
-            Some(f) if f.exceeds => Some(
-                floor_noise(
+        // the floor and the local floor as a noise level share one computation of the
+        // stencils (seconds at 50 x 50 entries); the report compares the final residual
+        // with the local floor whether or not the floor exceeds the variance
+        let (line_floor, floor_noise) = match matches!(noise.source, NoiseSource::Measured)
+            .then(|| {
+                line_floor_and_noise(
                     &band,
                     &noise,
                     &LineFloorConfig::default(),
                     FLOOR_HALF_WINDOW,
                 )
-                .map_err(err("noise level"))?,
-            ),
+                .ok()
+            })
+            .flatten()
+        {
+            Some((f, n)) => (Some(f), Some(n)),
+            None => (None, None),
+        };
+        let distortion_noise = match &line_floor {
+            Some(f) if f.exceeds => floor_noise.as_ref(),
             _ => None,
         };
         // with distortion that the variance misses, the fits are weighted by the scatter
         // the data show (the local floor): inverse-variance weights from a variance that
         // misses it by factors that change along the band would pull the model towards
         // the lines where it misses the most
-        let band = match &distortion_noise {
+        let band = match distortion_noise {
             Some(dn) if band.has_variance() => band
                 .with_variance(Some(dn.variance.clone()))
                 .map_err(err("noise level"))?,
@@ -194,7 +199,7 @@ impl FitContext {
             delay,
             noise,
             line_floor,
-            distortion_noise,
+            floor_noise,
             cmif: OnceLock::new(),
             weighting,
             fit_data,
@@ -219,7 +224,18 @@ impl FitContext {
     /// effect is still found where the residual stands above the data's own jitter.
     /// The weights of the fit stay those of the measured variance.
     pub fn judging_noise(&self) -> &NoiseLevel {
-        self.distortion_noise.as_ref().unwrap_or(&self.noise)
+        self.distortion_noise().unwrap_or(&self.noise)
+    }
+
+    /// The local floor ([`floor_noise`](Self::floor_noise)) when the floor significantly
+    /// exceeds the measured variance (nonlinear distortion that the variance misses);
+    /// `None` otherwise. The diagnosis loop judges the residual against it, see
+    /// [`judging_noise`](Self::judging_noise).
+    pub fn distortion_noise(&self) -> Option<&NoiseLevel> {
+        match &self.line_floor {
+            Some(f) if f.exceeds => self.floor_noise.as_ref(),
+            _ => None,
+        }
     }
 
     /// The data's total delay (hold + computation + transport), seconds, when estimated.

@@ -380,7 +380,7 @@ pub fn run(
         // the residual against the variance raised to the local line-to-line floor, when
         // the floor exceeds the variance and the residual is above the variance (the
         // verdict `nonlinear_distortion` needs it)
-        let floor_analysis = match &ctx.distortion_noise {
+        let floor_analysis = match ctx.distortion_noise() {
             Some(n) if analysis.significant => Some(
                 analyze_residual(
                     &ctx.band,

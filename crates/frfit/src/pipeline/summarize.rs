@@ -1,14 +1,13 @@
 //! The summary of a run (`summary.json`): the error statistics of a model against the
 //! data, the final model briefly, and the verdict from the final residual analysis.
 
-use super::context::FLOOR_HALF_WINDOW;
 use super::{FitContext, PipelineConfig};
 use crate::diagnose::effect_name;
 use crate::summary::*;
 use additive_riv::{AdditiveModel, FactorTarget, FitterReport, SubmodelKind};
 use frf_data::{Fit, Frf, FrfDataset};
 use realize::ResponseGrid;
-use validation::distortion::{floor_noise, residual_ratio, LineFloorConfig};
+use validation::distortion::residual_ratio;
 use validation::noise::{NoiseLevel, NoiseSource};
 use validation::residual::ResidualAnalysis;
 
@@ -173,16 +172,7 @@ pub(crate) fn distortion_summary(
         residual.extend(g.iter().zip(p).map(|(a, b)| a - b));
     }
     let r = residual_ratio(&residual, &ctx.noise);
-    let floor = ctx.distortion_noise.clone().or_else(|| {
-        floor_noise(
-            band,
-            &ctx.noise,
-            &LineFloorConfig::default(),
-            FLOOR_HALF_WINDOW,
-        )
-        .ok()
-    })?;
-    let rf = residual_ratio(&residual, &floor);
+    let rf = residual_ratio(&residual, ctx.floor_noise.as_ref()?);
     Some(DistortionSummary {
         order: fl.order,
         floor_to_variance: fl.ratio,
@@ -193,7 +183,7 @@ pub(crate) fn distortion_summary(
         floor_median_rel: fl.floor_median_rel,
         residual_to_variance: r,
         residual_to_floor: rf,
-        loop_against_floor: ctx.distortion_noise.is_some(),
+        loop_against_floor: ctx.distortion_noise().is_some(),
     })
 }
 
