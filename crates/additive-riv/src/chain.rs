@@ -436,7 +436,7 @@ pub const PROPORTIONAL_RESIDUE_TOL: f64 = 1e-2;
 /// `r = B_0 / (2 j w_d)`, purely imaginary. A residue with a real part (a mode of a
 /// structure whose damping is not proportional, as a common-denominator or subspace
 /// fit of real data returns) needs the first-order numerator `B_0 + B_1 s`.
-fn is_proportional(r: &faer::Mat<frf_data::C64>) -> bool {
+fn is_proportional(r: &faer::Mat<frf_data::C64>, tol: f64) -> bool {
     let (mut re, mut all) = (0.0, 0.0);
     for j in 0..r.ncols() {
         for i in 0..r.nrows() {
@@ -444,7 +444,7 @@ fn is_proportional(r: &faer::Mat<frf_data::C64>) -> bool {
             all += r[(i, j)].norm_sqr();
         }
     }
-    re <= PROPORTIONAL_RESIDUE_TOL * PROPORTIONAL_RESIDUE_TOL * all
+    re <= tol * tol * all
 }
 
 impl AdditiveModel {
@@ -463,6 +463,23 @@ impl AdditiveModel {
         fm: &FrfModel,
         band_hz: (f64, f64),
         zeta_unstable: f64,
+    ) -> Result<(AdditiveModel, Vec<String>), RivError> {
+        Self::from_frf_model_with(fm, band_hz, zeta_unstable, PROPORTIONAL_RESIDUE_TOL)
+    }
+
+    /// [`from_frf_model`](Self::from_frf_model) with the largest relative real part of a
+    /// residue that a constant numerator represents given as `proportional_tol`. A
+    /// constant numerator drops that real part, which changes the mode's contribution
+    /// by about `proportional_tol` of itself near its resonance: for a final model,
+    /// keep it well below the data's relative noise level (a refiner that fitted a
+    /// delay turns the residues' phases by up to `w tau`, a real part of 1e-3 to 1e-2
+    /// that the default tolerance would drop: 8 times the noise on a 20 x 20 plant with
+    /// noise 1e-3).
+    pub fn from_frf_model_with(
+        fm: &FrfModel,
+        band_hz: (f64, f64),
+        zeta_unstable: f64,
+        proportional_tol: f64,
     ) -> Result<(AdditiveModel, Vec<String>), RivError> {
         fm.validate()?;
         let f = &fm.factors;
@@ -495,7 +512,7 @@ impl AdditiveModel {
                 (
                     p.f_hz(),
                     p.zeta(),
-                    domain == Domain::Continuous && !is_proportional(&p.residue),
+                    domain == Domain::Continuous && !is_proportional(&p.residue, proportional_tol),
                 )
             })
             .collect();
