@@ -385,7 +385,7 @@ fn significantly_better(
     let (p1, p2) = (n_num(m1), n_num(m2));
     let dp = p2 - p1;
     let n_obs = 2.0 * data.n as f64 * entries;
-    if dp <= 0.0 || n_obs <= p2 || !(cost2 > 0.0) || !cost1.is_finite() {
+    if dp <= 0.0 || n_obs <= p2 || cost2.is_nan() || cost2 <= 0.0 || !cost1.is_finite() {
         return false;
     }
     let f = ((cost1 - cost2) / dp) / (cost2 / (n_obs - p2));
