@@ -157,6 +157,25 @@ fn dense_reference(m: &StateSpace, x: C64) -> Mat<C64> {
     g
 }
 
+/// Asserts that `got(k, i, j)` is the dense reference response of `m` at every point,
+/// to 1e-10 of the largest entry at that point.
+fn assert_matches_dense(m: &StateSpace, points: &[C64], got: impl Fn(usize, usize, usize) -> C64) {
+    let (n, ny, nu) = (m.n_states(), m.ny(), m.nu());
+    for (k, &x) in points.iter().enumerate() {
+        let want = dense_reference(m, x);
+        let scale = (0..ny)
+            .flat_map(|i| (0..nu).map(move |j| (i, j)))
+            .map(|(i, j)| want[(i, j)].norm())
+            .fold(0.0, f64::max);
+        for i in 0..ny {
+            for j in 0..nu {
+                let e = (got(k, i, j) - want[(i, j)]).norm() / scale;
+                assert!(e < 1e-10, "n = {n}, {ny}x{nu}, point {k}: {e:e}");
+            }
+        }
+    }
+}
+
 #[test]
 fn random_dense_models_match_dense_lu_on_both_solve_sides() {
     let mut r = rng(21);
@@ -185,19 +204,7 @@ fn random_dense_models_match_dense_lu_on_both_solve_sides() {
             .map(|_| C64::new(gauss(&mut r), 3.0 * gauss(&mut r)))
             .collect();
         let g = m.freq_response_at(&points).unwrap();
-        for (k, &x) in points.iter().enumerate() {
-            let want = dense_reference(&m, x);
-            let scale = (0..ny)
-                .flat_map(|i| (0..nu).map(move |j| (i, j)))
-                .map(|(i, j)| want[(i, j)].norm())
-                .fold(0.0, f64::max);
-            for i in 0..ny {
-                for j in 0..nu {
-                    let e = (g.get(k, i, j) - want[(i, j)]).norm() / scale;
-                    assert!(e < 1e-10, "n = {n}, {ny}x{nu}, point {k}: {e:e}");
-                }
-            }
-        }
+        assert_matches_dense(&m, &points, |k, i, j| g.get(k, i, j));
     }
 }
 
@@ -233,23 +240,13 @@ fn states_in_hessenberg_coordinates_give_the_response() {
             .collect();
         let z = hf.states_at(&points).unwrap();
         assert_eq!((z.ny, z.nu, z.len()), (n, nu, points.len()));
-        for (k, &x) in points.iter().enumerate() {
-            let want = dense_reference(&m, x);
-            let scale = (0..ny)
-                .flat_map(|i| (0..nu).map(move |j| (i, j)))
-                .map(|(i, j)| want[(i, j)].norm())
-                .fold(0.0, f64::max);
-            for i in 0..ny {
-                for j in 0..nu {
-                    let mut g = C64::new(m.d[(i, j)], 0.0);
-                    for l in 0..n {
-                        g += z.get(k, l, j) * ct[(i, l)];
-                    }
-                    let e = (g - want[(i, j)]).norm() / scale;
-                    assert!(e < 1e-10, "n = {n}, {ny}x{nu}, point {k}: {e:e}");
-                }
+        assert_matches_dense(&m, &points, |k, i, j| {
+            let mut g = C64::new(m.d[(i, j)], 0.0);
+            for l in 0..n {
+                g += z.get(k, l, j) * ct[(i, l)];
             }
-        }
+            g
+        });
     }
     // a pole is an error, not a NaN
     let m = ss(
