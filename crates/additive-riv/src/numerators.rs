@@ -99,15 +99,7 @@ fn solve_entry(
     // columns u * s and the target y * s (the divided problem, see EntryLines)
     let mut el = EntryLines::default();
     el.fill(e, data, basis, ng, &zero[..]);
-    let mut ut = Mat::<f64>::zeros(2 * n, nn + 1);
-    for j in 0..nn {
-        let col = ut.col_as_slice_mut(j);
-        let (cr, ci) = col.split_at_mut(n);
-        for k in 0..n {
-            cr[k] = basis.u_re[j * n + k] * el.s[k];
-            ci[k] = basis.u_im[j * n + k] * el.s[k];
-        }
-    }
+    let mut ut = basis.scaled_columns(&el.s, nn, 1);
     {
         let col = ut.col_as_slice_mut(nn);
         let (cr, ci) = col.split_at_mut(n);
@@ -226,15 +218,7 @@ fn solve_group(
     let n = data.n;
     let ne = grp.entries.len();
     let s0: Vec<f64> = grp.line_weights.iter().map(|w| w.sqrt()).collect();
-    let mut ut = Mat::<f64>::zeros(2 * n, nn);
-    for j in 0..nn {
-        let col = ut.col_as_slice_mut(j);
-        let (cr, ci) = col.split_at_mut(n);
-        for k in 0..n {
-            cr[k] = basis.u_re[j * n + k] * s0[k];
-            ci[k] = basis.u_im[j * n + k] * s0[k];
-        }
-    }
+    let ut = basis.scaled_columns(&s0, nn, 0);
     let mut z = Mat::<f64>::zeros(nn, nn);
     matmul(
         z.as_mut(),

@@ -313,6 +313,24 @@ pub struct Basis {
 }
 
 impl Basis {
+    /// The numerator regressor columns `u_j(k) s_k` of the first `nn` basis functions
+    /// with the line scales `s` (real parts in rows `0..n`, imaginary parts in rows
+    /// `n..2n`), as the first `nn` columns of a `2n x (nn + extra)` matrix whose `extra`
+    /// last columns are left zero (for right-hand sides).
+    pub fn scaled_columns(&self, s: &[f64], nn: usize, extra: usize) -> faer::Mat<f64> {
+        let n = self.n;
+        let mut ut = faer::Mat::<f64>::zeros(2 * n, nn + extra);
+        for j in 0..nn {
+            let col = ut.col_as_slice_mut(j);
+            let (cr, ci) = col.split_at_mut(n);
+            for k in 0..n {
+                cr[k] = self.u_re[j * n + k] * s[k];
+                ci[k] = self.u_im[j * n + k] * s[k];
+            }
+        }
+        ut
+    }
+
     /// Evaluates the basis of `model` at `omega`.
     pub fn new(model: &AdditiveModel, lay: &Layout, omega: &[f64]) -> Self {
         let n = omega.len();

@@ -84,7 +84,6 @@ pub fn noise_scale(v: f64, data: &FitData, n_params: usize) -> f64 {
 pub fn submodel_cost_increase(model: &AdditiveModel, data: &FitData) -> Result<Vec<f64>, RivError> {
     let lay = Layout::of(model);
     let nn = lay.n_num;
-    let n = data.n;
     let m = data.m();
     let basis = Basis::new(model, &lay, &data.omega);
     let (_, eta) = pack(model, &lay);
@@ -98,15 +97,7 @@ pub fn submodel_cost_increase(model: &AdditiveModel, data: &FitData) -> Result<V
     let per_entry = |e: usize| -> Result<Vec<f64>, RivError> {
         let mut el = EntryLines::default();
         el.fill(e, data, &basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        let mut a = Mat::<f64>::zeros(2 * n, nn);
-        for j in 0..nn {
-            let col = a.col_as_slice_mut(j);
-            let (cr, ci) = col.split_at_mut(n);
-            for k in 0..n {
-                cr[k] = basis.u_re[j * n + k] * el.s[k];
-                ci[k] = basis.u_im[j * n + k] * el.s[k];
-            }
-        }
+        let a = basis.scaled_columns(&el.s, nn, 0);
         let mut z = Mat::<f64>::zeros(nn, nn);
         matmul(
             z.as_mut(),
