@@ -294,7 +294,10 @@ fn iterate_core(
                 // the cost; say which.
                 non_descent += 1;
                 let rel_full = rel_norm(&upd.d_shared, &shared).max(rel_norm(&upd.d_eta, &eta));
-                convergence = if rel_full < 1e-6 {
+                // at the round-off level of the data's energy no step can lower the
+                // cost reliably: an exact fit, not a failure
+                let exact = c <= crate::complete::EXACT_FIT_REL * data.weighted_energy();
+                convergence = if rel_full < 1e-6 || exact {
                     Convergence::CostTolerance {
                         relative_change: 0.0,
                     }

@@ -10,6 +10,7 @@
 //! freedom. A peak must exceed the Bonferroni-corrected quantile over all lines. A mode
 //! is kept only when the F statistic of its parameters passes at significance `alpha`.
 
+use crate::complete::EXACT_FIT_REL;
 use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
 use crate::riv::{iterate, RivConfig};
 use crate::significance::{chi2_upper, f_statistic, noise_scale, submodel_cost_increase};
@@ -511,6 +512,9 @@ pub fn adapt_modes(
         // 2. add modes at residual peaks
         let n_old = model.submodels.len();
         let (lo, hi) = data.band_hz;
+        // an exact fit's residual is round-off: its peaks are no modes, whatever their
+        // F statistic against it (see `EXACT_FIT_REL`)
+        let exact = model_cost(&model, data) <= EXACT_FIT_REL * data.weighted_energy();
         let first_order = model_first_order(&model);
         let stats = ResidualStats::new(&model, data);
         let mut peak_at = Vec::new();
@@ -522,7 +526,7 @@ pub fn adapt_modes(
             cfg.peak_over_local,
         )
         .iter()
-        .filter(|(f, _)| *f > lo && *f < hi)
+        .filter(|(f, _)| !exact && *f > lo && *f < hi)
         .take(cfg.max_new_per_round)
         {
             model.push_mode(f, cfg.zeta0, first_order)?;

@@ -947,27 +947,53 @@ impl SubspaceInit {
             let observations = prepared.w.iter().filter(|&&w| w > 0.0).count();
             let params = |ps: &PoleSet| currency_params(ps, m);
             let k0 = ps.integrators;
+            // the poles the integrators are added to: those of the singular values
+            // (a trial of 2 integrators replaces a split double integrator that one
+            // added integrator could not), or those of an accepted pass
+            let mut base = ps.clone();
             for k in k0 + 1..=cfg.max_integrators {
-                let mut trial = ps.clone();
-                trial.integrators = k;
+                let trial = base.with_integrators(k, prepared.omega[0]);
                 let (tm, tc) =
                     fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &trial, &factors)?;
                 let t_cost = weighted_cost(&tm, data, &weighting)?;
-                let dp = (k - ps.integrators) * m;
-                let f = f_statistic(
-                    raw(cost) - raw(t_cost),
-                    dp,
-                    raw(t_cost),
-                    observations,
-                    params(&trial),
-                );
-                let fc = f_critical(dp, cfg.order_alpha).max(cfg.order_min_f);
+                // states below the band that the integrators replace (see
+                // `PoleSet::with_integrators`) count against the added parameters
+                let replaced = ps.pairs.len().saturating_sub(trial.pairs.len()) * 2
+                    + ps.reals.len().saturating_sub(trial.reals.len());
+                let dp = params(&trial).saturating_sub(params(&ps));
+                let (significant, test) = if dp == 0 {
+                    // no more parameters: the lower cost decides
+                    (
+                        t_cost < cost,
+                        "no more parameters than without them".to_string(),
+                    )
+                } else {
+                    let f = f_statistic(
+                        raw(cost) - raw(t_cost),
+                        dp,
+                        raw(t_cost),
+                        observations,
+                        params(&trial),
+                    );
+                    let fc = f_critical(dp, cfg.order_alpha).max(cfg.order_min_f);
+                    (
+                        f > fc,
+                        format!(
+                            "F = {f:.3e} {} {fc:.3} (alpha {:.0e})",
+                            if f > fc { ">" } else { "<=" },
+                            cfg.order_alpha
+                        ),
+                    )
+                };
                 let drop_ok = t_cost * min_drop <= cost;
                 messages.push(format!(
-                    "rigid body: {k} integrators against {}: F = {f:.3e} {} {fc:.3} (alpha {:.0e}), cost {:.4e} -> {:.4e}{}",
+                    "rigid body: {k} integrators against {}{}: {test}, cost {:.4e} -> {:.4e}{}",
                     ps.integrators,
-                    if f > fc { ">" } else { "<=" },
-                    cfg.order_alpha,
+                    if replaced > 0 {
+                        format!(" (replacing {replaced} states below the lowest line)")
+                    } else {
+                        String::new()
+                    },
                     cost,
                     t_cost,
                     if min_drop > 1.0 && !drop_ok {
@@ -976,11 +1002,68 @@ impl SubspaceInit {
                         String::new()
                     }
                 ));
-                if f > fc && drop_ok {
+                if significant && drop_ok {
                     ps = trial;
                     model = tm;
                     cond_res = tc;
                     cost = t_cost;
+                } else if significant && cfg.order.is_none() {
+                    // The flexible poles were estimated with the rigid body missing,
+                    // and their bias can hold the fall below `min_drop` (seed 2150 of
+                    // the chain harness through the hold: 1.23x with F = 274). The
+                    // trial is judged after a pass on the data with its rigid body
+                    // subtracted, against the same pass without the added integrators
+                    // (a pass alone can lower the cost).
+                    let pass = |model: &FrfModel, ps: &PoleSet| {
+                        self.flexible_pass(
+                            &prepared,
+                            model,
+                            (r, max_order),
+                            ny,
+                            inverse_variance,
+                            &g,
+                            &factors,
+                            ps,
+                            data,
+                            &weighting,
+                        )
+                    };
+                    // passes repeated while they lower the cost, as below
+                    let mut best: Option<FlexiblePass> = None;
+                    for _ in 0..FLEXIBLE_PASSES {
+                        let (m_from, p_from, c_from) = match &best {
+                            Some(b) => (&b.model, &b.poles, b.cost),
+                            None => (&tm, &trial, t_cost),
+                        };
+                        let Some(next) = pass(m_from, p_from)? else {
+                            break;
+                        };
+                        if next.cost >= c_from {
+                            break;
+                        }
+                        let gain = 1.0 - next.cost / c_from;
+                        best = Some(next);
+                        if gain < 0.01 {
+                            break;
+                        }
+                    }
+                    if let Some(next) = best {
+                        let without = pass(&model, &ps)?.map_or(cost, |b| b.cost.min(cost));
+                        let kept = next.cost * min_drop <= without;
+                        messages.push(format!(
+                            "rigid body: {k} integrators after a pass on the flexible part (order {}): cost {:.4e} against {without:.4e} without them ({})",
+                            next.order,
+                            next.cost,
+                            if kept { "kept" } else { "not kept" }
+                        ));
+                        if kept {
+                            base = next.poles.clone();
+                            ps = next.poles;
+                            model = next.model;
+                            cond_res = next.cond;
+                            cost = next.cost;
+                        }
+                    }
                 }
             }
             if ps.integrators > k0 {
@@ -1167,7 +1250,7 @@ const NO_VARIANCE_MIN_DROP: f64 = 10.0;
 /// Without the data's variance, the singular values more than this many times the
 /// smallest one computed stand above the floor of the projected data (round-off for
 /// exact data: about 1e-12 of the largest); see `SubspaceInit::later_orders`.
-const FLOOR_FACTOR: f64 = 5.0;
+const FLOOR_FACTOR: f64 = 2.5;
 
 /// Without the data's variance, the most orders above the largest-gap proposal whose
 /// residue refits `SubspaceInit::later_orders` compares.
