@@ -296,7 +296,11 @@ proptest! {
         recovers_noise_free(&chains(false), seed, hold)?;
     }
 
-    /// The same with 7 or 8 modes ([`MANY_MODES`]).
+    /// The same with 7 or 8 modes ([`MANY_MODES`]). Swept over seeds 0..800, both
+    /// holds: 1 of 1600 systems fails, seed 769 through the hold (the subspace chains
+    /// at 4.3e-6: a double integrator of F = 37 that neither the orders above the gap,
+    /// 8.7x lower cost where 10x is asked, nor the passes on the flexible part, 3.8e-9
+    /// against 1.2e-9, bring in; the refiners keep the start's rigid-body structure).
     #[test]
     fn noise_free_data_with_7_or_8_modes_are_recovered(seed in 0u64..10_000, hold in any::<bool>()) {
         recovers_noise_free_spread(&chains(false), seed, hold, MANY_MODES)?;

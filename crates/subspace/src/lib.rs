@@ -21,8 +21,10 @@
 //! 5. [`currency`]: exact continuous poles (`s = ln(z)/Ts` or the inverse bilinear map),
 //!    rigid-body integrators recognised at `z = 1` / `s = 0`, unstable poles reflected,
 //!    residues and feedthrough by linear least squares with the currency's own response;
-//!    with the data's variance, rigid-body integrators the singular values missed are
-//!    added by an F test and the subspace step is repeated on the data with the fitted
+//!    rigid-body integrators the singular values missed are added by an F test
+//!    (without the data's variance they must also halve the cost, at once or after
+//!    passes on the flexible part; they replace the states of a split double
+//!    integrator) and the subspace step is repeated on the data with the fitted
 //!    rigid body subtracted (while the cost falls); a pole merged from eigenvalues that
 //!    noise split (a residue of rank > 1) is the candidate with the lowest refit cost;
 //! 6. [`delay_refine`]: a free delay (estimated, or given as a start) refined with the

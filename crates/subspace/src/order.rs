@@ -42,9 +42,12 @@ pub enum OrderRule {
     /// residue refit (a rigid body weak at the lowest lines sits at the noise level of
     /// the singular values: the random systems of the tests, and a second subspace pass
     /// on the flexible part then). Without the data's variance the F statistic's noise
-    /// model is not known to hold, and an integrator must also lower the cost tenfold
-    /// (a missed rigid body dominates the residual: noise-free 7-8 mode systems whose
-    /// largest singular-value gap lies above the rigid body's states). The order sweep is not the default: with
+    /// model is not known to hold, and an integrator must also lower the cost twice
+    /// over, at once or after passes on the flexible part with its rigid body
+    /// subtracted (a missed rigid body dominates the residual: noise-free 7-8 mode
+    /// systems whose largest singular-value gap lies above the rigid body's states);
+    /// added integrators replace the states of a split double integrator
+    /// (`PoleSet::with_integrators`). The order sweep is not the default: with
     /// rank-2 residues it may keep a mode's noise-split eigenvalues as two modes (see
     /// [`OrderRule::FTest`]), and it refits the residues at every candidate order
     /// (on the reference wafer stage: 20 s against 2.2 s, and order 41 with a real
