@@ -347,7 +347,11 @@ pub struct RivReport {
 }
 
 /// The refined-IV refiner of the chain (Algorithm 1 of the wafer-stage paper with the
-/// adaptation of the set of modes), from any [`ChainModel`].
+/// adaptation of the set of modes), from any [`ChainModel`]. From another
+/// initialiser's model (the currency start) with the adaptation on, the rigid body
+/// (0, 1 or 2 integrators) is chosen again with the refined poles
+/// ([`crate::complete::rigid_body_again`]) and the fit refined again when that lowers
+/// the cost.
 #[derive(Debug, Clone, Default)]
 pub struct RivRefine {
     /// Settings.
@@ -411,6 +415,38 @@ impl Estimator for RivRefine {
             }
             None => iterate(model, &fd, &riv)?,
         };
+        let mut fit = fit;
+        if kind == "currency" && self.config.adapt.is_some() {
+            // the start's rigid body is another method's choice: chosen again with the
+            // refined poles
+            let integrators =
+                |m: &AdditiveModel| m.submodels.iter().map(|s| s.integrators).max().unwrap_or(0);
+            let before = integrators(&fit.model);
+            if let Some(m) =
+                crate::complete::rigid_body_again(&fit.model, &fd, &CompleteConfig::default())
+            {
+                let again = iterate(m, &fd, &riv)?;
+                let (c0, c1) = (
+                    fit.final_cost().unwrap_or(f64::INFINITY),
+                    again.final_cost().unwrap_or(f64::INFINITY),
+                );
+                if c1 < c0 {
+                    messages.push(format!(
+                        "rigid body chosen again with the refined poles: {before} -> {} integrator(s), cost {c0:.4e} -> {c1:.4e}",
+                        integrators(&again.model)
+                    ));
+                    let mut history = std::mem::take(&mut fit.cost_history);
+                    history.extend_from_slice(&again.cost_history);
+                    let iterations = fit.iterations + again.iterations;
+                    let mut notes = std::mem::take(&mut fit.messages);
+                    fit = again;
+                    notes.append(&mut fit.messages);
+                    fit.messages = notes;
+                    fit.cost_history = history;
+                    fit.iterations = iterations;
+                }
+            }
+        }
         let mut fit = fit.with_report(report);
         messages.append(&mut fit.messages);
         fit.messages = messages;

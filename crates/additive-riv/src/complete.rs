@@ -332,6 +332,38 @@ fn rechoose_rigid_body(
     best.map(|(m, _)| m)
 }
 
+/// The rigid body of a refined `model` chosen again (0, 1 or 2 integrators, by the
+/// F test of the numerator fits with its poles held, as step 3 of the completion),
+/// the poles settled around a changed one at the coarse tolerance of `cfg`. Returns the
+/// settled model when the choice changed and the settled cost is below that of
+/// `model`; `None` otherwise. A refiner that continues another initialiser's model
+/// keeps its rigid-body structure; the initialiser may have missed integrators whose
+/// states stood at the noise or round-off level of its own order selection.
+pub fn rigid_body_again(
+    model: &AdditiveModel,
+    data: &FitData,
+    cfg: &CompleteConfig,
+) -> Option<AdditiveModel> {
+    let coarse = RivConfig {
+        param_tol: cfg.coarse_tol,
+        cost_tol: cfg.coarse_tol * 1e-2,
+        max_iterations: cfg.coarse_max_iterations,
+        progress: ProgressSink::none(),
+        ..RivConfig::default()
+    };
+    let v = model_cost(model, data, None);
+    if !(v.is_finite() && v > EXACT_FIT_REL * data.weighted_energy()) {
+        return None;
+    }
+    let m = rechoose_rigid_body(model, data, cfg)?;
+    if integrators_of(&m) == integrators_of(model) {
+        return None;
+    }
+    let mut its = 0;
+    let m = settle(m, data, &coarse, &mut its)?;
+    (model_cost(&m, data, None) < v).then_some(m)
+}
+
 /// Natural frequency (Hz) and damping of every mode of `model`.
 fn mode_list(model: &AdditiveModel) -> Vec<(f64, f64)> {
     model.modes().iter().map(|m| (m.f_hz, m.zeta)).collect()
