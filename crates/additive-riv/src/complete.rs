@@ -332,6 +332,17 @@ fn rechoose_rigid_body(
     best.map(|(m, _)| m)
 }
 
+/// The refinement settings that settle poles at the coarse tolerance of `cfg`.
+fn coarse_config(cfg: &CompleteConfig) -> RivConfig {
+    RivConfig {
+        param_tol: cfg.coarse_tol,
+        cost_tol: cfg.coarse_tol * 1e-2,
+        max_iterations: cfg.coarse_max_iterations,
+        progress: ProgressSink::none(),
+        ..RivConfig::default()
+    }
+}
+
 /// The rigid body of a refined `model` chosen again (0, 1 or 2 integrators, by the
 /// F test of the numerator fits with its poles held, as step 3 of the completion),
 /// the poles settled around a changed one at the coarse tolerance of `cfg`. Returns the
@@ -344,13 +355,7 @@ pub fn rigid_body_again(
     data: &FitData,
     cfg: &CompleteConfig,
 ) -> Option<AdditiveModel> {
-    let coarse = RivConfig {
-        param_tol: cfg.coarse_tol,
-        cost_tol: cfg.coarse_tol * 1e-2,
-        max_iterations: cfg.coarse_max_iterations,
-        progress: ProgressSink::none(),
-        ..RivConfig::default()
-    };
+    let coarse = coarse_config(cfg);
     let v = model_cost(model, data, None);
     if !(v.is_finite() && v > EXACT_FIT_REL * data.weighted_energy()) {
         return None;
@@ -729,13 +734,7 @@ pub fn complete_start(
     add_modes: bool,
     cfg: &CompleteConfig,
 ) -> Result<(AdditiveModel, CompleteReport), RivError> {
-    let coarse = RivConfig {
-        param_tol: cfg.coarse_tol,
-        cost_tol: cfg.coarse_tol * 1e-2,
-        max_iterations: cfg.coarse_max_iterations,
-        progress: ProgressSink::none(),
-        ..RivConfig::default()
-    };
+    let coarse = coarse_config(cfg);
     let mut report = CompleteReport {
         integrators: (integrators_of(&model), integrators_of(&model)),
         ..Default::default()
