@@ -330,6 +330,34 @@ fn run_once(
     Ok((first, second))
 }
 
+/// A weighted cost with the data's own variance at or below this many times its
+/// expectation at the noise level is at the noise level (`run_single` then runs no
+/// chain again from the refined delay: nothing can fit significantly better). Its
+/// standard deviation is `1/sqrt(N)` with `N` the lines times entries (below 0.02 from 2500
+/// of them); a variance estimated from few realizations raises the expectation by
+/// `d2 / (d2 - 2)` (1.08 with 2 periods of 8 realizations), and such a fit is then
+/// refitted as before.
+const AT_NOISE_LEVEL: f64 = 1.05;
+
+/// The weighted cost `c` ([`weighted_cost`]) of `model` over its expectation at the
+/// noise level, `sum w |E|^2 / (N - p / 2)` with `N` the lines times entries and `p`
+/// the model's real parameters, when the weighting is the data's inverse variance;
+/// `None` otherwise (the cost then has no known scale) or when `p / 2 >= N`.
+fn noise_level_ratio(
+    model: &ChainModel,
+    c: f64,
+    data: DynData<'_>,
+    weighting: &frf_data::Weighting,
+) -> Option<f64> {
+    use frf_data::ModelStructure;
+    if weighting.resolve(data) != frf_data::Weighting::InverseVariance || !c.is_finite() {
+        return None;
+    }
+    let n = (data.n_lines() * data.n_entries()) as f64;
+    let dof = n - model.model.n_params() as f64 / 2.0;
+    (dof > 0.0).then(|| c * 2.0 * data.n_lines() as f64 / dof)
+}
+
 /// Runs the initialiser `init` then `refine` on `data` with the delay rule of the module
 /// documentation.
 fn run_single(
@@ -378,13 +406,30 @@ fn run_single(
         });
     }
     let refined = end_delay.unwrap_or(start_delay);
+    let cost =
+        |m: &ChainModel| weighted_cost(&m.model, data, &s.weighting).unwrap_or(f64::INFINITY);
+    let c1 = cost(&model);
+    if let Some(ratio) = noise_level_ratio(&model, c1, data, &s.weighting) {
+        if ratio <= AT_NOISE_LEVEL {
+            // no run can fit significantly better than the noise
+            notes.push(format!(
+                "the delay moved from {:.2} us (start) to {:.2} us in the refinement; no run from the start with it: the fit is at the noise level (weighted cost {ratio:.3} times its expectation)",
+                start_delay * 1e6,
+                refined * 1e6
+            ));
+            return Ok(ChainResult {
+                model,
+                chain,
+                links,
+                notes,
+                runs: Vec::new(),
+            });
+        }
+    }
     let s2 = ChainSettings {
         delay: DelayChoice::Start { seconds: refined },
         ..s.clone()
     };
-    let cost =
-        |m: &ChainModel| weighted_cost(&m.model, data, &s.weighting).unwrap_or(f64::INFINITY);
-    let c1 = cost(&model);
     match run_once(data, init, refine, &s2, o) {
         Ok((f2, r2)) => {
             let (model2, chain2, links2) = finish(f2, r2);
@@ -613,6 +658,49 @@ mod tests {
     use super::*;
     use frf_data::{Frf, Weighting};
     use realize::{FrfModel, ModalModel, PolePair, C64};
+
+    /// The weighted cost of the true model on data with complex noise of the stated
+    /// variance is at its expectation (within a few `1/sqrt(N)`), and twice that noise
+    /// doubles the ratio; without a variance (or another weighting) there is no ratio.
+    #[test]
+    fn the_noise_level_ratio_of_the_truth_is_one() {
+        use rand::{Rng, SeedableRng};
+        let mut m = ModalModel::new(2, 2);
+        m.pairs.push(PolePair::from_second_order(
+            40.0,
+            0.02,
+            &faer::Mat::from_fn(2, 2, |i, j| 1e4 * (1.0 + i as f64 + 2.0 * j as f64)),
+        ));
+        let truth: ChainModel = FrfModel::new(m).into();
+        let f: Vec<f64> = (1..=1000).map(|k| 10.0 + 0.1 * k as f64).collect();
+        let w: Vec<f64> = f.iter().map(|f| std::f64::consts::TAU * f).collect();
+        let g = truth.model.freq_response(&w).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        // uniform components of variance s^2 / 2 each: E|e|^2 = s^2
+        let mut noisy = |scale: f64| {
+            let (mut vals, mut var) = (g.values.clone(), Vec::new());
+            for v in vals.iter_mut() {
+                let s = 1e-3 * v.norm();
+                let a = (1.5f64).sqrt() * s * scale;
+                *v += C64::new(rng.random_range(-a..a), rng.random_range(-a..a));
+                var.push(s * s);
+            }
+            Frf::new(f.clone(), 2, 2, vals, None)
+                .unwrap()
+                .with_variance(Some(var))
+                .unwrap()
+        };
+        let ratio = |d: &Frf, wt: &Weighting| {
+            let c = weighted_cost(&truth.model, d, wt).unwrap();
+            noise_level_ratio(&truth, c, d, wt)
+        };
+        let d1 = noisy(1.0);
+        let r1 = ratio(&d1, &Weighting::Auto).unwrap();
+        assert!((r1 - 1.0).abs() < 0.05, "{r1}");
+        let r2 = ratio(&noisy(2.0f64.sqrt()), &Weighting::Auto).unwrap();
+        assert!((r2 - 2.0).abs() < 0.1, "{r2}");
+        assert!(ratio(&d1, &Weighting::InverseMagnitude).is_none());
+    }
 
     #[test]
     fn init_names_expand_auto_and_check_each_name() {
