@@ -399,7 +399,23 @@ fn run_single(
         _ => false,
     };
     let (model, chain, links) = finish(first, second);
-    if !redo {
+    let refined = end_delay.unwrap_or(start_delay);
+    let cost =
+        |m: &ChainModel| weighted_cost(&m.model, data, &s.weighting).unwrap_or(f64::INFINITY);
+    let c1 = if redo { cost(&model) } else { f64::NAN };
+    // at the noise level no run can fit significantly better
+    let at_noise = redo
+        && noise_level_ratio(&model, c1, data, &s.weighting)
+            .filter(|r| (r - 1.0).abs() <= AT_NOISE_LEVEL - 1.0)
+            .map(|ratio| {
+                notes.push(format!(
+                    "the delay moved from {:.2} us (start) to {:.2} us in the refinement; no run from the start with it: the fit is at the noise level (weighted cost {ratio:.3} times its expectation)",
+                    start_delay * 1e6,
+                    refined * 1e6
+                ))
+            })
+            .is_some();
+    if !redo || at_noise {
         return Ok(ChainResult {
             model,
             chain,
@@ -407,27 +423,6 @@ fn run_single(
             notes,
             runs: Vec::new(),
         });
-    }
-    let refined = end_delay.unwrap_or(start_delay);
-    let cost =
-        |m: &ChainModel| weighted_cost(&m.model, data, &s.weighting).unwrap_or(f64::INFINITY);
-    let c1 = cost(&model);
-    if let Some(ratio) = noise_level_ratio(&model, c1, data, &s.weighting) {
-        if (ratio - 1.0).abs() <= AT_NOISE_LEVEL - 1.0 {
-            // no run can fit significantly better than the noise
-            notes.push(format!(
-                "the delay moved from {:.2} us (start) to {:.2} us in the refinement; no run from the start with it: the fit is at the noise level (weighted cost {ratio:.3} times its expectation)",
-                start_delay * 1e6,
-                refined * 1e6
-            ));
-            return Ok(ChainResult {
-                model,
-                chain,
-                links,
-                notes,
-                runs: Vec::new(),
-            });
-        }
     }
     let s2 = ChainSettings {
         delay: DelayChoice::Start { seconds: refined },
