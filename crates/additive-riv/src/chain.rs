@@ -275,13 +275,7 @@ impl Estimator for CmifInit {
             report.completion = Some(rep);
             timings.push(("complete", t.elapsed()));
         }
-        report.integrators = init
-            .model
-            .submodels
-            .iter()
-            .map(|s| s.integrators)
-            .max()
-            .unwrap_or(0);
+        report.integrators = init.model.integrators();
         report.init_cost = init.final_cost().unwrap_or(f64::NAN);
         let mut fit = init.with_report(report);
         if let Some(d) = &fit.report.delay_estimate {
@@ -419,9 +413,7 @@ impl Estimator for RivRefine {
         if kind == "currency" && self.config.adapt.is_some() {
             // the start's rigid body is another method's choice: chosen again with the
             // refined poles
-            let integrators =
-                |m: &AdditiveModel| m.submodels.iter().map(|s| s.integrators).max().unwrap_or(0);
-            let before = integrators(&fit.model);
+            let before = fit.model.integrators();
             if let Some(m) =
                 crate::complete::rigid_body_again(&fit.model, &fd, &CompleteConfig::default())
             {
@@ -433,7 +425,7 @@ impl Estimator for RivRefine {
                 if c1 < c0 {
                     messages.push(format!(
                         "rigid body chosen again with the refined poles: {before} -> {} integrator(s), cost {c0:.4e} -> {c1:.4e}",
-                        integrators(&again.model)
+                        again.model.integrators()
                     ));
                     let mut history = std::mem::take(&mut fit.cost_history);
                     history.extend_from_slice(&again.cost_history);

@@ -268,15 +268,6 @@ fn settle(
     }
 }
 
-fn integrators_of(model: &AdditiveModel) -> usize {
-    model
-        .submodels
-        .iter()
-        .map(|s| s.integrators)
-        .max()
-        .unwrap_or(0)
-}
-
 /// `model` with its rigid body replaced by one of `l` integrators (none for 0), placed
 /// first, and the numerators refitted (eq. 24); `None` when the structure is not
 /// possible or the numerator problem fails.
@@ -361,7 +352,7 @@ pub fn rigid_body_again(
         return None;
     }
     let m = rechoose_rigid_body(model, data, cfg)?;
-    if integrators_of(&m) == integrators_of(model) {
+    if m.integrators() == model.integrators() {
         return None;
     }
     let mut its = 0;
@@ -736,7 +727,7 @@ pub fn complete_start(
 ) -> Result<(AdditiveModel, CompleteReport), RivError> {
     let coarse = coarse_config(cfg);
     let mut report = CompleteReport {
-        integrators: (integrators_of(&model), integrators_of(&model)),
+        integrators: (model.integrators(), model.integrators()),
         ..Default::default()
     };
     let mut its = 0;
@@ -750,11 +741,11 @@ pub fn complete_start(
     };
     let mut v = model_cost(&cur, data, None);
     let rechoose = |cur: AdditiveModel, v: f64, its: &mut usize| -> (AdditiveModel, f64) {
-        let l_now = integrators_of(&cur);
+        let l_now = cur.integrators();
         let Some(m) = rechoose_rigid_body(&cur, data, cfg) else {
             return (cur, v);
         };
-        if integrators_of(&m) == l_now {
+        if m.integrators() == l_now {
             return (cur, v);
         }
         // the new rigid body stands only with poles that settle around it
@@ -928,7 +919,7 @@ pub fn complete_start(
     if add_modes {
         cur = prune_insignificant(cur, data, cfg, &coarse, &mut its, &mut report);
     }
-    report.integrators.1 = integrators_of(&cur);
+    report.integrators.1 = cur.integrators();
     report.iterations = its;
     Ok((cur, report))
 }

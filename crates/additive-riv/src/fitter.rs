@@ -304,13 +304,7 @@ pub(crate) fn choose_rigid_body(
         };
     }
     let mut best = best.ok_or_else(|| RivError::Structure("no modes and no rigid body".into()))?;
-    let l = best
-        .model
-        .submodels
-        .iter()
-        .map(|s| s.integrators)
-        .max()
-        .unwrap_or(0);
+    let l = best.model.integrators();
     best.messages = vec![format!(
         "rigid body: {l} integrator(s), chosen by comparing the initial fits ({})",
         tried

@@ -634,6 +634,15 @@ impl AdditiveModel {
         }
     }
 
+    /// Integrators of the rigid-body part (the most of any submodel; 0 without one).
+    pub fn integrators(&self) -> usize {
+        self.submodels
+            .iter()
+            .map(|s| s.integrators)
+            .max()
+            .unwrap_or(0)
+    }
+
     /// Frequencies and damping of the [`SubmodelKind::Mode`] submodels.
     pub fn modes(&self) -> Vec<ModeInfo> {
         self.submodels

@@ -92,12 +92,7 @@ pub fn final_model_summary(fit: &Fit<AdditiveModel>) -> FinalModelSummary {
         order,
         delay_s: model.factor.delay_s,
         hold: hold_name(model),
-        rigid_body_integrators: model
-            .submodels
-            .iter()
-            .map(|s| s.integrators)
-            .max()
-            .unwrap_or(0),
+        rigid_body_integrators: model.integrators(),
         feedthrough: model
             .submodels
             .iter()
