@@ -1012,44 +1012,36 @@ impl SubspaceInit {
                     // The flexible poles were estimated with the rigid body missing,
                     // and their bias can hold the fall below `min_drop` (seed 2150 of
                     // the chain harness through the hold: 1.23x with F = 274). The
-                    // trial is judged after a pass on the data with its rigid body
-                    // subtracted, against the same pass without the added integrators
-                    // (a pass alone can lower the cost).
-                    let pass = |model: &FrfModel, ps: &PoleSet| {
-                        self.flexible_pass(
-                            &prepared,
-                            model,
-                            (r, max_order),
-                            ny,
-                            inverse_variance,
-                            &g,
-                            &factors,
-                            ps,
-                            data,
-                            &weighting,
-                        )
-                    };
-                    // passes repeated while they lower the cost, as below
-                    let mut best: Option<FlexiblePass> = None;
-                    for _ in 0..FLEXIBLE_PASSES {
-                        let (m_from, p_from, c_from) = match &best {
-                            Some(b) => (&b.model, &b.poles, b.cost),
-                            None => (&tm, &trial, t_cost),
-                        };
-                        let Some(next) = pass(m_from, p_from)? else {
-                            break;
-                        };
-                        if next.cost >= c_from {
-                            break;
-                        }
-                        let gain = 1.0 - next.cost / c_from;
-                        best = Some(next);
-                        if gain < 0.01 {
-                            break;
-                        }
-                    }
+                    // trial is judged after passes on the data with its rigid body
+                    // subtracted (repeated while they lower the cost), against one pass
+                    // without the added integrators (a pass alone can lower the cost).
+                    let best = self.flexible_passes(
+                        &prepared,
+                        (r, max_order),
+                        ny,
+                        inverse_variance,
+                        &g,
+                        &factors,
+                        data,
+                        &weighting,
+                        (&tm, &trial, t_cost),
+                        |_, _, _, _| {},
+                    )?;
                     if let Some(next) = best {
-                        let without = pass(&model, &ps)?.map_or(cost, |b| b.cost.min(cost));
+                        let without = self
+                            .flexible_pass(
+                                &prepared,
+                                &model,
+                                (r, max_order),
+                                ny,
+                                inverse_variance,
+                                &g,
+                                &factors,
+                                &ps,
+                                data,
+                                &weighting,
+                            )?
+                            .map_or(cost, |b| b.cost.min(cost));
                         let kept = next.cost * min_drop <= without;
                         messages.push(format!(
                             "rigid body: {k} integrators after a pass on the flexible part (order {}): cost {:.4e} against {without:.4e} without them ({})",
@@ -1078,43 +1070,33 @@ impl SubspaceInit {
                 // subtracted and the subspace step repeated on the flexible part alone.
                 if cfg.order.is_none() {
                     let t2 = Instant::now();
-                    // repeated while it lowers the cost: each pass subtracts the rigid
-                    // body fitted with the previous pass's flexible poles
-                    for pass in 2..2 + FLEXIBLE_PASSES {
-                        let Some(next) = self.flexible_pass(
-                            &prepared,
-                            &model,
-                            (r, max_order),
-                            ny,
-                            inverse_variance,
-                            &g,
-                            &factors,
-                            &ps,
-                            data,
-                            &weighting,
-                        )?
-                        else {
-                            break;
-                        };
-                        let kept = next.cost < cost;
-                        messages.push(format!(
-                            "pass {pass} on the data with the rigid body subtracted: order {} for the flexible part, cost {:.4e} -> {:.4e} ({})",
-                            next.order,
-                            cost,
-                            next.cost,
-                            if kept { "kept" } else { "not kept" }
-                        ));
-                        if !kept {
-                            break;
-                        }
-                        let gain = 1.0 - next.cost / cost;
+                    // each pass subtracts the rigid body fitted with the previous pass's
+                    // flexible poles
+                    let best = self.flexible_passes(
+                        &prepared,
+                        (r, max_order),
+                        ny,
+                        inverse_variance,
+                        &g,
+                        &factors,
+                        data,
+                        &weighting,
+                        (&model, &ps, cost),
+                        |i, before, next, kept| {
+                            messages.push(format!(
+                                "pass {} on the data with the rigid body subtracted: order {} for the flexible part, cost {before:.4e} -> {:.4e} ({})",
+                                i + 2,
+                                next.order,
+                                next.cost,
+                                if kept { "kept" } else { "not kept" }
+                            ))
+                        },
+                    )?;
+                    if let Some(next) = best {
                         ps = next.poles;
                         model = next.model;
                         cond_res = next.cond;
                         cost = next.cost;
-                        if gain < 0.01 {
-                            break;
-                        }
                     }
                     timings.push(("flexible pass".to_string(), t2.elapsed().as_secs_f64()));
                 }
@@ -1564,6 +1546,62 @@ impl SubspaceInit {
             cond,
             cost,
         }))
+    }
+}
+
+impl SubspaceInit {
+    /// Passes on the flexible part ([`flexible_pass`](Self::flexible_pass)) from
+    /// `start` (model, poles, cost), each from the last one kept, while they lower the
+    /// cost: at most [`FLEXIBLE_PASSES`], ending after a pass that lowers it by less
+    /// than 1 %. `seen(i, cost before, pass, kept)` is told of every pass made (`i`
+    /// from 0). Returns the last pass kept, `None` when none lowered the cost.
+    #[allow(clippy::too_many_arguments)]
+    fn flexible_passes<D: FrfDataset + ?Sized>(
+        &self,
+        prepared: &crate::prepare::Prepared,
+        orders: (usize, usize),
+        ny: usize,
+        inverse_variance: bool,
+        g: &[C64],
+        factors: &KnownFactors,
+        data: &D,
+        weighting: &Weighting,
+        start: (&FrfModel, &PoleSet, f64),
+        mut seen: impl FnMut(usize, f64, &FlexiblePass, bool),
+    ) -> Result<Option<FlexiblePass>, SubspaceError> {
+        let mut best: Option<FlexiblePass> = None;
+        for i in 0..FLEXIBLE_PASSES {
+            let (model, ps, before) = match &best {
+                Some(b) => (&b.model, &b.poles, b.cost),
+                None => start,
+            };
+            let Some(next) = self.flexible_pass(
+                prepared,
+                model,
+                orders,
+                ny,
+                inverse_variance,
+                g,
+                factors,
+                ps,
+                data,
+                weighting,
+            )?
+            else {
+                break;
+            };
+            let kept = next.cost < before;
+            seen(i, before, &next, kept);
+            if !kept {
+                break;
+            }
+            let gain = 1.0 - next.cost / before;
+            best = Some(next);
+            if gain < 0.01 {
+                break;
+            }
+        }
+        Ok(best)
     }
 }
 
