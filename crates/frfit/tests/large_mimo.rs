@@ -242,3 +242,54 @@ fn a_fitted_delay_does_not_cost_the_final_model_its_residues() {
         );
     }
 }
+
+/// Exact data without a variance (an FE model's FRF): the subspace step has no noise
+/// level to count the singular values against, and the largest-gap rule took an order
+/// within the default cap (60) where the 40 rank-one modes need 80 states. With no gap
+/// up to the cap, the cap is doubled as with a variance, and every mode is found to
+/// round-off.
+#[test]
+fn exact_data_without_a_variance_get_the_order_cap_they_need() {
+    faer::set_global_parallelism(faer::Par::Seq);
+    let r = RandomModal::generate(&RandomModalConfig {
+        ny: 6,
+        nu: 6,
+        modes: 40,
+        lines: 1500,
+        noise: 0.0,
+        seed: 3,
+        ..RandomModalConfig::default()
+    })
+    .unwrap();
+    assert!(r.measured.variance_vec().is_none());
+    let settings = ChainSettings {
+        delay: DelayChoice::None,
+        ..Default::default()
+    };
+    let out = run_chain(
+        &r.measured,
+        "subspace",
+        "none",
+        &settings,
+        &AdditiveOptions::default(),
+    )
+    .unwrap();
+    let model = &out.model.model;
+    let true_f: Vec<f64> = r.plant.modes.iter().map(|m| m.f_hz).collect();
+    let fit_f: Vec<f64> = model.modal.pairs.iter().map(|p| p.f_hz()).collect();
+    let n = found(&true_f, &fit_f, 1e-6);
+    let w = r.noiseless.omegas();
+    let g = realize::ResponseGrid {
+        ny: 6,
+        nu: 6,
+        values: r.noiseless.values_vec(),
+    };
+    let (median, _) = model.relative_error(&w, &g).unwrap();
+    println!(
+        "{n}/40 modes within 1e-6, {} fitted, median error {median:.3e} (exact data)",
+        fit_f.len()
+    );
+    assert_eq!(n, 40, "modes found: {fit_f:?}");
+    assert_eq!(fit_f.len(), 40);
+    assert!(median < 1e-8, "median error {median:.3e}");
+}
