@@ -113,6 +113,12 @@ impl Default for MlConfig {
 
 /// The nonlinear start vector of `model` in the order of `lay`: the poles of the pairs
 /// (real and imaginary parts), the real poles, the delay, the dynamics coefficients.
+/// The imaginary part of a pole pair, relative to its magnitude, at or below which the
+/// pair is critically damped (damping above 0.9998): a pair of real poles whose
+/// frequency the data cannot identify (the information matrix is singular there); such
+/// a pair at the optimum is dropped and the refinement repeated.
+const CRITICAL_IM: f64 = 2e-2;
+
 fn nonlinear_start(model: &FrfModel, lay: &Layout) -> Vec<f64> {
     let mut theta = Vec::with_capacity(lay.n_nl());
     for p in &model.modal.pairs {
@@ -776,7 +782,9 @@ impl MlRefine {
                     out_f.eval.cost
                 ));
                 work = work.add(out_f.work);
+                let held_iterations = out.iterations;
                 out = out_f;
+                out.iterations += held_iterations;
                 prob = prob_f;
                 lay = lay_f;
                 n_params = n_params_f;
@@ -824,15 +832,27 @@ impl MlRefine {
                     .modal
                     .pairs
                     .iter()
-                    .filter(|p| p.pole.im > 1e4 * w_top)
-                    .map(|p| format!("mode at {:.3e} Hz, 1e4 times beyond the band", p.f_hz())),
+                    .filter(|p| p.pole.im > 1e4 * w_top || p.pole.im <= CRITICAL_IM * p.pole.norm())
+                    .map(|p| {
+                        if p.pole.im > 1e4 * w_top {
+                            format!("mode at {:.3e} Hz, 1e4 times beyond the band", p.f_hz())
+                        } else {
+                            format!(
+                                "mode at {:.3} Hz with damping {:.6} (critically damped: its frequency is not identifiable)",
+                                p.f_hz(),
+                                p.zeta()
+                            )
+                        }
+                    }),
             )
             .collect();
         if !(bad.is_empty() && far.is_empty()) && drops < cfg.unstable_drops && dynamics_stable {
             let mut next = fitted.clone();
-            next.modal
-                .pairs
-                .retain(|p| p.pole.re < 0.0 && p.pole.im <= 1e4 * w_top);
+            next.modal.pairs.retain(|p| {
+                p.pole.re < 0.0
+                    && p.pole.im <= 1e4 * w_top
+                    && p.pole.im > CRITICAL_IM * p.pole.norm()
+            });
             next.modal
                 .real_poles
                 .retain(|p| p.pole < 0.0 && p.pole >= -1e4 * w_top);
