@@ -111,14 +111,14 @@ impl Default for MlConfig {
     }
 }
 
-/// The nonlinear start vector of `model` in the order of `lay`: the poles of the pairs
-/// (real and imaginary parts), the real poles, the delay, the dynamics coefficients.
 /// The imaginary part of a pole pair, relative to its magnitude, at or below which the
 /// pair is critically damped (damping above 0.9998): a pair of real poles whose
 /// frequency the data cannot identify (the information matrix is singular there); such
 /// a pair at the optimum is dropped and the refinement repeated.
 const CRITICAL_IM: f64 = 2e-2;
 
+/// The nonlinear start vector of `model` in the order of `lay`: the poles of the pairs
+/// (real and imaginary parts), the real poles, the delay, the dynamics coefficients.
 fn nonlinear_start(model: &FrfModel, lay: &Layout) -> Vec<f64> {
     let mut theta = Vec::with_capacity(lay.n_nl());
     for p in &model.modal.pairs {
@@ -744,7 +744,7 @@ impl MlRefine {
             n_params = n_params2;
             out = out2;
         }
-        if held_delay && out.convergence.is_converged() {
+        if held_delay && leaving(lay.n_pairs, lay.n_real)(&out.theta).is_none() {
             // the delay freed at the adapted structure's optimum (a refinement that
             // stopped on a pole leaving the stable region is refined again from its
             // optimum with the pole dropped, and the delay held again)
