@@ -32,19 +32,23 @@ fn found(true_f: &[f64], fit_f: &[f64], tol: f64) -> usize {
     n
 }
 
-#[test]
-fn subspace_finds_all_modes_beyond_the_default_order_cap() {
+/// `--init subspace --refine none` on a random 6 x 6 plant with 40 modes, 1500 lines
+/// (seed 3) at relative noise `noise` (0: exact data without a variance): the modes
+/// within `tol` of a true one, the modes fitted, and the median error against the
+/// noiseless response.
+fn subspace_on_6_by_6_with_40_modes(noise: f64, tol: f64) -> (usize, Vec<f64>, f64) {
     faer::set_global_parallelism(faer::Par::Seq);
     let r = RandomModal::generate(&RandomModalConfig {
         ny: 6,
         nu: 6,
         modes: 40,
         lines: 1500,
-        noise: 1e-4,
+        noise,
         seed: 3,
         ..RandomModalConfig::default()
     })
     .unwrap();
+    assert_eq!(r.measured.variance_vec().is_none(), noise == 0.0);
     let settings = ChainSettings {
         delay: DelayChoice::None,
         ..Default::default()
@@ -60,7 +64,7 @@ fn subspace_finds_all_modes_beyond_the_default_order_cap() {
     let model = &out.model.model;
     let true_f: Vec<f64> = r.plant.modes.iter().map(|m| m.f_hz).collect();
     let fit_f: Vec<f64> = model.modal.pairs.iter().map(|p| p.f_hz()).collect();
-    let n = found(&true_f, &fit_f, 1e-3);
+    let n = found(&true_f, &fit_f, tol);
     let w = r.noiseless.omegas();
     let g = realize::ResponseGrid {
         ny: 6,
@@ -68,6 +72,12 @@ fn subspace_finds_all_modes_beyond_the_default_order_cap() {
         values: r.noiseless.values_vec(),
     };
     let (median, _) = model.relative_error(&w, &g).unwrap();
+    (n, fit_f, median)
+}
+
+#[test]
+fn subspace_finds_all_modes_beyond_the_default_order_cap() {
+    let (n, fit_f, median) = subspace_on_6_by_6_with_40_modes(1e-4, 1e-3);
     println!(
         "{n}/40 modes within 0.1 %, {} fitted, median error {median:.3e} vs noiseless (noise 1e-4)",
         fit_f.len()
@@ -250,41 +260,7 @@ fn a_fitted_delay_does_not_cost_the_final_model_its_residues() {
 /// round-off.
 #[test]
 fn exact_data_without_a_variance_get_the_order_cap_they_need() {
-    faer::set_global_parallelism(faer::Par::Seq);
-    let r = RandomModal::generate(&RandomModalConfig {
-        ny: 6,
-        nu: 6,
-        modes: 40,
-        lines: 1500,
-        noise: 0.0,
-        seed: 3,
-        ..RandomModalConfig::default()
-    })
-    .unwrap();
-    assert!(r.measured.variance_vec().is_none());
-    let settings = ChainSettings {
-        delay: DelayChoice::None,
-        ..Default::default()
-    };
-    let out = run_chain(
-        &r.measured,
-        "subspace",
-        "none",
-        &settings,
-        &AdditiveOptions::default(),
-    )
-    .unwrap();
-    let model = &out.model.model;
-    let true_f: Vec<f64> = r.plant.modes.iter().map(|m| m.f_hz).collect();
-    let fit_f: Vec<f64> = model.modal.pairs.iter().map(|p| p.f_hz()).collect();
-    let n = found(&true_f, &fit_f, 1e-6);
-    let w = r.noiseless.omegas();
-    let g = realize::ResponseGrid {
-        ny: 6,
-        nu: 6,
-        values: r.noiseless.values_vec(),
-    };
-    let (median, _) = model.relative_error(&w, &g).unwrap();
+    let (n, fit_f, median) = subspace_on_6_by_6_with_40_modes(0.0, 1e-6);
     println!(
         "{n}/40 modes within 1e-6, {} fitted, median error {median:.3e} (exact data)",
         fit_f.len()

@@ -501,13 +501,7 @@ impl MlRefine {
                     n_real: lay.n_real - 1,
                     ..lay.clone()
                 };
-                let p2 = Problem::new(
-                    lay2.clone(),
-                    prob.omega.clone(),
-                    prob.g.clone(),
-                    prob.sw.clone(),
-                    m2.clone(),
-                );
+                let p2 = prob.with_layout(lay2.clone(), m2.clone());
                 if let Ok(ev2) = p2.evaluate(&nonlinear_start(&m2, &lay2)) {
                     let f = (ev2.cost - eval0.cost) / (lay.m() + 1) as f64;
                     if weakest.is_none_or(|(_, fw)| f < fw) {
@@ -590,13 +584,7 @@ impl MlRefine {
                     ..lay.clone()
                 };
                 let theta_h = nonlinear_start(&model, &lay_h);
-                let prob_h = Problem::new(
-                    lay_h.clone(),
-                    prob.omega.clone(),
-                    prob.g.clone(),
-                    prob.sw.clone(),
-                    model.clone(),
-                );
+                let prob_h = prob.with_layout(lay_h.clone(), model.clone());
                 match prob_h.evaluate(&theta_h) {
                     Ok(ev) => {
                         let np = lay_h.n_nl() + m * lay_h.n_lin();
@@ -657,13 +645,7 @@ impl MlRefine {
                     theta2.extend([-z0 * wn, wn * (1.0 - z0 * z0).sqrt()]);
                 }
                 theta2.extend_from_slice(&out.theta[2 * np..]);
-                let prob2 = Problem::new(
-                    lay2.clone(),
-                    prob.omega.clone(),
-                    prob.g.clone(),
-                    prob.sw.clone(),
-                    model.clone(),
-                );
+                let prob2 = prob.with_layout(lay2.clone(), model.clone());
                 let ev2 = prob2.evaluate(&theta2).ok()?;
                 let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
                 let out2 = iterate(
@@ -755,13 +737,7 @@ impl MlRefine {
             let mut theta_f = out.theta.clone();
             let at = lay_f.delay_index().unwrap_or(theta_f.len());
             theta_f.insert(at, model.factors.delay_s);
-            let prob_f = Problem::new(
-                lay_f.clone(),
-                prob.omega.clone(),
-                prob.g.clone(),
-                prob.sw.clone(),
-                model.clone(),
-            );
+            let prob_f = prob.with_layout(lay_f.clone(), model.clone());
             if let Ok(ev) = prob_f.evaluate(&theta_f) {
                 let n_params_f = lay_f.n_nl() + m * lay_f.n_lin();
                 let out_f = iterate(

@@ -181,6 +181,18 @@ pub(crate) struct Singular {
 }
 
 impl Problem {
+    /// The same data and weights with another structure `lay` (a mode added or
+    /// dropped, the delay held or freed) and template `template`.
+    pub fn with_layout(&self, lay: Layout, template: FrfModel) -> Problem {
+        Problem::new(
+            lay,
+            self.omega.clone(),
+            self.g.clone(),
+            self.sw.clone(),
+            template,
+        )
+    }
+
     pub fn new(
         lay: Layout,
         omega: Vec<f64>,
