@@ -954,9 +954,6 @@ impl SubspaceInit {
             OrderRule::SingularValues => false,
         };
         let raw = |c: f64| c * 2.0 * nl as f64;
-        let m = ny * nu;
-        let observations = prepared.w.iter().filter(|&&w| w > 0.0).count();
-        let params = |ps: &PoleSet| currency_params(ps, m);
         // Without the data's variance the F statistic's noise estimate (the larger
         // model's residual) is not known to be white under the weighting: an added
         // integrator must also lower the cost by `INTEGRATOR_MIN_DROP`.
@@ -970,6 +967,18 @@ impl SubspaceInit {
             && raw(cost) > EXACT_REL_COST * prepared.energy()
         {
             // the rigid-body integrators the singular values missed (see `integrator_test`)
+            let m = ny * nu;
+            let observations = prepared.w.iter().filter(|&&w| w > 0.0).count();
+            let params = |ps: &PoleSet| currency_params(ps, m);
+            let pass_inputs = PassInputs {
+                prepared: &prepared,
+                orders: (r, max_order),
+                inverse_variance,
+                g: &g,
+                factors: &factors,
+                data,
+                weighting: &weighting,
+            };
             let k0 = ps.integrators;
             // the poles the integrators are added to: those of the singular values
             // (a trial of 2 integrators replaces a split double integrator that one
@@ -1038,32 +1047,11 @@ impl SubspaceInit {
                     // trial is judged after passes on the data with its rigid body
                     // subtracted (repeated while they lower the cost), against one pass
                     // without the added integrators (a pass alone can lower the cost).
-                    let best = self.flexible_passes(
-                        &prepared,
-                        (r, max_order),
-                        ny,
-                        inverse_variance,
-                        &g,
-                        &factors,
-                        data,
-                        &weighting,
-                        (&tm, &trial, t_cost),
-                        |_, _, _, _| {},
-                    )?;
+                    let best =
+                        self.flexible_passes(&pass_inputs, (&tm, &trial, t_cost), |_, _, _, _| {})?;
                     if let Some(next) = best {
                         let without = self
-                            .flexible_pass(
-                                &prepared,
-                                &model,
-                                (r, max_order),
-                                ny,
-                                inverse_variance,
-                                &g,
-                                &factors,
-                                &ps,
-                                data,
-                                &weighting,
-                            )?
+                            .flexible_pass(&pass_inputs, &model, &ps)?
                             .map_or(cost, |b| b.cost.min(cost));
                         let kept = next.cost * min_drop <= without;
                         messages.push(format!(
@@ -1096,14 +1084,7 @@ impl SubspaceInit {
                     // each pass subtracts the rigid body fitted with the previous pass's
                     // flexible poles
                     let best = self.flexible_passes(
-                        &prepared,
-                        (r, max_order),
-                        ny,
-                        inverse_variance,
-                        &g,
-                        &factors,
-                        data,
-                        &weighting,
+                        &pass_inputs,
                         (&model, &ps, cost),
                         |i, before, next, kept| {
                             messages.push(format!(
@@ -1352,6 +1333,33 @@ fn sv_proposal(
     }
 }
 
+/// The fixed inputs of the passes on the flexible part
+/// ([`SubspaceInit::flexible_pass`], [`SubspaceInit::flexible_passes`]).
+struct PassInputs<'a, D: ?Sized> {
+    /// The prepared data (the delay divided out, weighted).
+    prepared: &'a crate::prepare::Prepared,
+    /// The block rows of the projection and the order cap.
+    orders: (usize, usize),
+    /// Whether the weighting is the inverse variance (the singular values' noise rule).
+    inverse_variance: bool,
+    /// The data, line after line, each `vec(G)` column-major.
+    g: &'a [C64],
+    /// The known factors of the currency.
+    factors: &'a KnownFactors,
+    /// The data set the costs are taken on.
+    data: &'a D,
+    /// The weighting of the costs.
+    weighting: &'a Weighting,
+}
+
+impl<D: ?Sized> Clone for PassInputs<'_, D> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<D: ?Sized> Copy for PassInputs<'_, D> {}
+
 /// The result of [`SubspaceInit::flexible_pass`].
 struct FlexiblePass {
     order: usize,
@@ -1547,21 +1555,23 @@ impl SubspaceInit {
     /// The subspace step repeated on the data with the rigid-body part of `model`
     /// subtracted: projection, order from the singular values, (12), (17), poles; the
     /// integrators of `ps` are kept and all residues refitted on the full data.
-    #[allow(clippy::too_many_arguments)]
     fn flexible_pass<D: FrfDataset + ?Sized>(
         &self,
-        prepared: &crate::prepare::Prepared,
+        inputs: &PassInputs<'_, D>,
         model: &FrfModel,
-        (r, max_order): (usize, usize),
-        ny: usize,
-        inverse_variance: bool,
-        g: &[C64],
-        factors: &KnownFactors,
         ps: &PoleSet,
-        data: &D,
-        weighting: &Weighting,
     ) -> Result<Option<FlexiblePass>, SubspaceError> {
         let cfg = &self.config;
+        let PassInputs {
+            prepared,
+            orders: (r, max_order),
+            inverse_variance,
+            g,
+            factors,
+            data,
+            weighting,
+        } = *inputs;
+        let ny = prepared.ny;
         let mut rigid = FrfModel {
             modal: realize::ModalModel::new(model.ny(), model.nu()),
             factors: factors.clone(),
@@ -1625,17 +1635,9 @@ impl SubspaceInit {
     /// cost: at most [`FLEXIBLE_PASSES`], ending after a pass that lowers it by less
     /// than 1 %. `seen(i, cost before, pass, kept)` is told of every pass made (`i`
     /// from 0). Returns the last pass kept, `None` when none lowered the cost.
-    #[allow(clippy::too_many_arguments)]
     fn flexible_passes<D: FrfDataset + ?Sized>(
         &self,
-        prepared: &crate::prepare::Prepared,
-        orders: (usize, usize),
-        ny: usize,
-        inverse_variance: bool,
-        g: &[C64],
-        factors: &KnownFactors,
-        data: &D,
-        weighting: &Weighting,
+        inputs: &PassInputs<'_, D>,
         start: (&FrfModel, &PoleSet, f64),
         mut seen: impl FnMut(usize, f64, &FlexiblePass, bool),
     ) -> Result<Option<FlexiblePass>, SubspaceError> {
@@ -1645,19 +1647,7 @@ impl SubspaceInit {
                 Some(b) => (&b.model, &b.poles, b.cost),
                 None => start,
             };
-            let Some(next) = self.flexible_pass(
-                prepared,
-                model,
-                orders,
-                ny,
-                inverse_variance,
-                g,
-                factors,
-                ps,
-                data,
-                weighting,
-            )?
-            else {
+            let Some(next) = self.flexible_pass(inputs, model, ps)? else {
                 break;
             };
             let kept = next.cost < before;
