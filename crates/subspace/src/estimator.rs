@@ -1219,7 +1219,7 @@ const ROBUST_LINE_C: f64 = 9.0;
 /// simulate random-modal`, seeds 1..7) the subspace start's robust cost fell by 4e-5 to
 /// 8.4e-4 at refined delays of 4 to 25 us, from which the ML refinement ended with
 /// spurious modes. A delay the periodogram estimate missed by a fraction of its
-/// resolution lowers it by 0.9 to 4.5 % (the reference wafer stages: 2.6 us).
+/// resolution lowers it by 0.9 to 2.3 % (the reference wafer stages: 2.3 to 2.7 us).
 fn delay_move_material(
     robust: (f64, f64),
     cost: (f64, f64),
