@@ -316,3 +316,61 @@ fn the_default_chain_finds_every_mode_of_a_delay_free_20_by_20_plant() {
         model.factor.delay_s * 1e6
     );
 }
+
+/// The compressed subspace step (a 12 x 12 plant: more than 100 entries) searches the
+/// delay on the outputs projected onto 8 fixed directions
+/// (`SubspaceConfig::output_directions`), at an eighth of the cost on 50 x 50 data
+/// (18.4 s -> 3.2 s there). A delay the periodogram estimate misses by a fraction of its
+/// resolution is still moved towards: a random plant (seed 2, 20 modes, 1500 lines,
+/// relative noise 1e-4) delayed by 13.7 us, estimated at 9.95 us and refined to 15.46 us
+/// (on every output: 14.29 us from an estimate of 8.65 us). The subspace poles are not
+/// maximum-likelihood estimates; the refiner takes the delay from there.
+#[test]
+fn the_compressed_delay_search_on_projected_outputs_finds_the_delay() {
+    faer::set_global_parallelism(faer::Par::Seq);
+    let r = RandomModal::generate(&RandomModalConfig {
+        ny: 12,
+        nu: 12,
+        modes: 20,
+        lines: 1500,
+        noise: 1e-4,
+        seed: 2,
+        ..RandomModalConfig::default()
+    })
+    .unwrap();
+    let tau = 13.7e-6;
+    let m = &r.measured;
+    let omega = m.omegas();
+    let mut values = m.values_vec();
+    let per_line = m.ny() * m.nu();
+    for (k, &w) in omega.iter().enumerate() {
+        let rot = num_complex::Complex64::from_polar(1.0, -w * tau);
+        values[k * per_line..(k + 1) * per_line]
+            .iter_mut()
+            .for_each(|v| *v *= rot);
+    }
+    let freq: Vec<f64> = (0..m.n_lines()).map(|k| m.freq_hz(k)).collect();
+    let data = frf_data::Frf::new(freq, m.ny(), m.nu(), values, m.variance_vec()).unwrap();
+    let id = subspace::SubspaceInit::new(subspace::SubspaceConfig::default())
+        .identify(&data)
+        .unwrap();
+    let rep = id.report.delay_refinement.clone().unwrap();
+    let refined = id.model.factors.delay_s;
+    println!(
+        "estimate {:.3} us, refined {:.3} us, truth {:.3} us",
+        rep.start_s * 1e6,
+        refined * 1e6,
+        tau * 1e6
+    );
+    assert!(!rep.passes.is_empty());
+    for p in &rep.passes {
+        assert_eq!(p.output_directions, Some(8), "{:?}", id.messages);
+    }
+    assert!(
+        (refined - tau).abs() < 0.6 * (rep.start_s - tau).abs(),
+        "estimate {:.3} us, refined {:.3} us\n{}",
+        rep.start_s * 1e6,
+        refined * 1e6,
+        id.messages.join("\n")
+    );
+}

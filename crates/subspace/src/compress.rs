@@ -92,6 +92,51 @@ pub fn compress_inputs<D: FrfDataset + ?Sized>(
     Ok(out)
 }
 
+/// The data with the outputs projected onto the columns of `u` (`ny x k`): `U^T G(w)`,
+/// with the variance `sum_o u_ol^2 var_oj` of each projected entry when the data carry
+/// one. The delay search of the compressed path runs on it (see
+/// [`crate::SubspaceConfig::output_directions`]).
+pub fn compress_outputs<D: FrfDataset + ?Sized>(
+    data: &D,
+    u: &Mat<f64>,
+) -> Result<Frf, SubspaceError> {
+    let (ny, nu, nl, k) = (data.ny(), data.nu(), data.n_lines(), u.ncols());
+    if u.nrows() != ny {
+        return Err(SubspaceError::invalid(
+            "output directions",
+            format!("{} x {k}", u.nrows()),
+            format!("the data have {ny} outputs"),
+        ));
+    }
+    let g = data.values_vec();
+    let var = data.variance_vec();
+    let (m, mc) = (ny * nu, k * nu);
+    let mut values = vec![C64::new(0.0, 0.0); nl * mc];
+    let mut variance = var.as_ref().map(|_| vec![0.0; nl * mc]);
+    for line in 0..nl {
+        for j in 0..nu {
+            for l in 0..k {
+                let (mut s, mut v) = (C64::new(0.0, 0.0), 0.0);
+                for o in 0..ny {
+                    let c = u[(o, l)];
+                    s += g[line * m + j * ny + o] * c;
+                    if let Some(src) = var.as_ref() {
+                        v += c * c * src[line * m + j * ny + o];
+                    }
+                }
+                values[line * mc + j * k + l] = s;
+                if let Some(out) = variance.as_mut() {
+                    out[line * mc + j * k + l] = v;
+                }
+            }
+        }
+    }
+    let freq: Vec<f64> = (0..nl).map(|line| data.freq_hz(line)).collect();
+    let mut out = Frf::new(freq, k, nu, values, variance)?;
+    out.units = data.units().map(str::to_string);
+    Ok(out)
+}
+
 /// The prepared data with the outputs projected onto the columns of `u` (`ny x k`):
 /// `U^T h` per line and input, the variance `sum_o u_ol^2 var_oj` (the weights of the
 /// criterion follow from it).
@@ -150,6 +195,34 @@ mod tests {
         }
         assert_eq!(v, directions(50, 8, 7));
         assert_ne!(v, directions(50, 8, 8));
+    }
+
+    #[test]
+    fn projected_outputs_are_the_product_and_carry_the_variance() {
+        let (ny, nu, nl) = (5, 3, 4);
+        let freq: Vec<f64> = (1..=nl).map(|k| k as f64).collect();
+        let values: Vec<C64> = (0..nl * ny * nu)
+            .map(|i| C64::new(0.3 * i as f64 - 2.0, i as f64))
+            .collect();
+        let var: Vec<f64> = (0..nl * ny * nu).map(|i| 2.0 + i as f64).collect();
+        let data = Frf::new(freq, ny, nu, values.clone(), Some(var.clone())).unwrap();
+        let u = directions(ny, 2, 3);
+        let c = compress_outputs(&data, &u).unwrap();
+        assert_eq!((c.ny(), c.nu(), c.n_lines()), (2, nu, nl));
+        for k in 0..nl {
+            for l in 0..2 {
+                for j in 0..nu {
+                    let (mut s, mut sv) = (C64::new(0.0, 0.0), 0.0);
+                    for o in 0..ny {
+                        s += values[k * ny * nu + j * ny + o] * u[(o, l)];
+                        sv += u[(o, l)].powi(2) * var[k * ny * nu + j * ny + o];
+                    }
+                    assert!((c.value(k, l, j) - s).norm() < 1e-12);
+                    assert!((c.variance(k, l, j).unwrap() - sv).abs() < 1e-12);
+                }
+            }
+        }
+        assert!(compress_outputs(&data, &directions(4, 2, 3)).is_err());
     }
 
     #[test]

@@ -576,6 +576,12 @@ pub struct DelayPass {
     /// The delay divided out before the subspace step of this pass, seconds (beyond
     /// the hold).
     pub divided_out_s: f64,
+    /// The outputs of the data were projected onto this many fixed directions for the
+    /// search (see [`crate::SubspaceConfig::output_directions`]); the costs of this
+    /// pass are then those of the projected data, the start's residues refitted on
+    /// them. `None`: every output.
+    #[serde(default)]
+    pub output_directions: Option<usize>,
     /// The weighted cost of the subspace model (residues refitted) at that delay.
     pub subspace_cost: f64,
     /// The robust cost ([`huber`]) of that model, the criterion that chooses between

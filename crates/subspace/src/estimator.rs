@@ -126,10 +126,12 @@ pub struct SubspaceConfig {
     pub compress_above: usize,
     /// Directions of the compressed inputs (and of the outputs of (17)). Default: 8.
     pub compress_directions: usize,
-    /// Solve (17) on the outputs projected onto this many fixed directions (set by the
-    /// compressed path; see [`crate::compress`]); `None` solves it on every output.
-    /// Default: `None`.
-    pub b_d_output_directions: Option<usize>,
+    /// Solve (17), and search the delay ([`crate::delay_refine`]), on the outputs
+    /// projected onto this many fixed directions (set by the compressed path; see
+    /// [`crate::compress`]): with many outputs both cost `ny / output_directions` times
+    /// less, and the residues of every output are refitted with the poles found. `None`
+    /// uses every output. Default: `None`.
+    pub output_directions: Option<usize>,
     /// Analyses of the data the caller already made (the chain's: the delay estimate),
     /// used instead of computing them again. Default: none.
     pub precomputed: Precomputed,
@@ -164,7 +166,7 @@ impl Default for SubspaceConfig {
             merge_tol: 1e-3,
             compress_above: 100,
             compress_directions: 8,
-            b_d_output_directions: None,
+            output_directions: None,
             precomputed: Precomputed::default(),
             progress: ProgressSink::none(),
         }
@@ -281,9 +283,16 @@ impl SubspaceInit {
         if c.order == Some(0) {
             return Err(SubspaceError::invalid("order", 0, "must be >= 1 state"));
         }
-        if c.compress_directions == 0 || c.b_d_output_directions == Some(0) {
+        if c.compress_directions == 0 {
             return Err(SubspaceError::invalid(
                 "compress_directions",
+                0,
+                "must be >= 1 direction",
+            ));
+        }
+        if c.output_directions == Some(0) {
+            return Err(SubspaceError::invalid(
+                "output_directions",
                 0,
                 "must be >= 1 direction",
             ));
@@ -437,7 +446,7 @@ impl SubspaceInit {
         let inner = SubspaceInit::new(SubspaceConfig {
             compress_above: usize::MAX,
             weighting: weighting.clone(),
-            b_d_output_directions: (ny > k).then_some(k),
+            output_directions: (ny > k).then_some(k),
             ..cfg.clone()
         });
         if nu <= k {
@@ -509,7 +518,7 @@ impl SubspaceInit {
         Ok(id)
     }
 
-    /// (17) on the prepared data, on `b_d_output_directions` output directions when
+    /// (17) on the prepared data, on `output_directions` output directions when
     /// set (see [`crate::compress`]; `D` back through `U`).
     fn b_d(
         &self,
@@ -517,7 +526,7 @@ impl SubspaceInit {
         a: &faer::Mat<f64>,
         c: &faer::Mat<f64>,
     ) -> Result<(faer::Mat<f64>, faer::Mat<f64>, f64, f64), SubspaceError> {
-        match self.config.b_d_output_directions {
+        match self.config.output_directions {
             Some(k) if k < prepared.ny => {
                 let u = crate::compress::directions(prepared.ny, k, COMPRESS_SEED + 1);
                 let pu = crate::compress::project_outputs(prepared, &u);
@@ -558,7 +567,23 @@ impl SubspaceInit {
         let weighting = cfg.weighting.resolve(data);
         let inverse_variance = matches!(weighting, Weighting::InverseVariance);
         let w = weighting.weights(data)?;
-        let observations = w.iter().filter(|&&x| x > 0.0).count();
+        // the data of the search: every output, or the outputs projected (see
+        // `output_directions`; the residue refits at the start and at the refined delay
+        // are then both made on the projected data, so the test compares like with like)
+        let projected = match cfg.output_directions {
+            Some(k) if k < data.ny() => {
+                let u = crate::compress::directions(data.ny(), k, COMPRESS_SEED + 2);
+                let pd = crate::compress::compress_outputs(data, &u)?;
+                let pw = weighting.weights(&pd)?;
+                Some((pd.values_vec(), pw, k))
+            }
+            _ => None,
+        };
+        let (sny, sg, sw) = match &projected {
+            Some((pg, pw, k)) => (*k, pg.as_slice(), pw.as_slice()),
+            None => (data.ny(), g.as_slice(), w.as_slice()),
+        };
+        let observations = sw.iter().filter(|&&x| x > 0.0).count();
         let w_max = omega.iter().copied().fold(0.0, f64::max);
         let half_width = cfg
             .delay_half_width
@@ -574,27 +599,37 @@ impl SubspaceInit {
         for pass in 1..=cfg.delay_passes {
             let ts = Instant::now();
             let dc = DelayCost {
-                ny: data.ny(),
+                ny: sny,
                 nu: data.nu(),
                 omega: &omega,
-                g: &g,
-                w: &w,
+                g: sg,
+                w: sw,
                 poles: &poles,
                 factors: &cur.model.factors,
             };
+            // the start: the subspace model, or its poles' residue refit on the projection
+            let start_projected = match projected {
+                Some(_) => Some(dc.at(tau_div)?),
+                None => None,
+            };
+            let (start_model, start_cost) = match &start_projected {
+                Some(p) => (&p.model, p.cost),
+                None => (&cur.model, cur.report.cost),
+            };
             let (rw, med_start) =
-                delay_refine::robust_weights(&cur.model, &omega, &g, &w, ROBUST_LINE_C)?;
+                delay_refine::robust_weights(start_model, &omega, sg, sw, ROBUST_LINE_C)?;
             // the threshold of the robust cost that compares the passes: fixed by the first
             let thr = *threshold.get_or_insert(ROBUST_LINE_C * med_start);
-            let robust_start = huber(&line_residuals(&cur.model, &omega, &g, &w)?, thr);
+            let robust_start = huber(&line_residuals(start_model, &omega, sg, sw)?, thr);
             let fast = RotatedCost::new(&dc, rw)?.expanded(tau_div, half_width);
             let min = delay_refine::minimise(|t| fast.at(t), tau_div, half_width, cfg.delay_grid);
             let exact = dc.at(min.tau)?;
-            let robust_refined = huber(&line_residuals(&exact.model, &omega, &g, &w)?, thr);
+            let robust_refined = huber(&line_residuals(&exact.model, &omega, sg, sw)?, thr);
             search_s += ts.elapsed().as_secs_f64();
             let rec = DelayPass {
                 divided_out_s: tau_div,
-                subspace_cost: cur.report.cost,
+                output_directions: projected.as_ref().map(|p| p.2),
+                subspace_cost: start_cost,
                 subspace_robust_cost: robust_start,
                 refined_s: min.tau,
                 refined_cost: exact.cost,
@@ -603,7 +638,7 @@ impl SubspaceInit {
                 at_edge: min.at_edge,
             };
             notes.push(format!(
-                "delay pass {pass}: {:.4} us divided out, cost {:.4e} (robust {:.4e}); with its poles fixed the robust residue refit is best at {:.4} us, cost {:.4e} (robust {:.4e}; {} evaluations{})",
+                "delay pass {pass}: {:.4} us divided out, cost {:.4e} (robust {:.4e}); with its poles fixed the robust residue refit is best at {:.4} us, cost {:.4e} (robust {:.4e}; {} evaluations{}{})",
                 rec.divided_out_s * 1e6,
                 rec.subspace_cost,
                 rec.subspace_robust_cost,
@@ -615,17 +650,35 @@ impl SubspaceInit {
                     format!(", at the edge of the bracket +-{:.3} us", half_width * 1e6)
                 } else {
                     String::new()
+                },
+                match rec.output_directions {
+                    Some(k) => format!(
+                        "; costs of the outputs projected onto {k} of {} directions",
+                        data.ny()
+                    ),
+                    None => String::new(),
                 }
             ));
             passes.push(rec);
             let mut score = robust_start;
             if delay_move_material(
                 (robust_start, robust_refined),
-                (cur.report.cost, exact.cost),
+                (start_cost, exact.cost),
                 (observations, omega.len()),
                 inverse_variance,
                 cfg,
             ) {
+                // the residues of every output at the refined delay
+                let exact = match projected {
+                    Some(_) => DelayCost {
+                        ny: data.ny(),
+                        g: &g,
+                        w: &w,
+                        ..dc
+                    }
+                    .at(min.tau)?,
+                    None => exact,
+                };
                 cur.model = exact.model;
                 cur.report.cost = exact.cost;
                 cur.report.conditioning.residues = exact.cond;
