@@ -87,6 +87,15 @@ pub struct MlConfig {
     /// `min_f` times the noise per parameter (see [`MlRefine`]'s messages). Default:
     /// true.
     pub prune_real_poles: bool,
+    /// With a measured variance, test the highest integrator of the rigid body at the
+    /// optimum (after the structure adaptation and the freed delay): when it explains
+    /// less than `min_f` times the noise per parameter with the poles held (the F test
+    /// of the mode additions, `1/s^k` against `1/s^(k-1)`), it is dropped and the
+    /// refinement continued without it, and the test repeated on the next. An
+    /// initialiser whose start stood far above the noise level keeps integrators that
+    /// took up part of its misfit (random 20 x 20 plants without a rigid body: two, of
+    /// full rank); at the noise level they explain nothing. Default: true.
+    pub prune_integrators: bool,
     /// Progress callback.
     pub progress: ProgressSink,
 }
@@ -106,6 +115,7 @@ impl Default for MlConfig {
             min_f: 25.0,
             unstable_drops: 3,
             prune_real_poles: true,
+            prune_integrators: true,
             progress: ProgressSink::none(),
         }
     }
@@ -726,44 +736,104 @@ impl MlRefine {
             n_params = n_params2;
             out = out2;
         }
-        if held_delay && leaving(lay.n_pairs, lay.n_real)(&out.theta).is_none() {
-            // the delay freed at the adapted structure's optimum (a refinement that
-            // stopped on a pole leaving the stable region is refined again from its
-            // optimum with the pole dropped, and the delay held again)
-            let lay_f = Layout {
-                delay: true,
-                ..lay.clone()
-            };
-            let mut theta_f = out.theta.clone();
-            let at = lay_f.delay_index().unwrap_or(theta_f.len());
-            theta_f.insert(at, model.factors.delay_s);
-            let prob_f = prob.with_layout(lay_f.clone(), model.clone());
-            if let Ok(ev) = prob_f.evaluate(&theta_f) {
-                let n_params_f = lay_f.n_nl() + m * lay_f.n_lin();
-                let out_f = iterate(
-                    &prob_f,
-                    theta_f,
-                    ev,
-                    (n * m) as f64 - n_params_f as f64 / 2.0,
-                    &cfg.lm,
-                    valid(lay_f.n_pairs),
-                    leaving(lay_f.n_pairs, lay_f.n_real),
-                    &cfg.progress,
-                );
-                messages.push(format!(
-                    "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and freed after the structure adaptation: cost {:.4e} -> {:.4e}",
-                    model.factors.delay_s * 1e6,
-                    eval_start_cost,
-                    out.eval.cost,
-                    out_f.eval.cost
-                ));
-                work = work.add(out_f.work);
+        // the rigid body chosen again (`prune_integrators`) at the optimum, before a
+        // held delay is freed (one refinement then continues both) and after
+        let mut delay_freed = !held_delay;
+        loop {
+            while measured
+                && cfg.prune_integrators
+                && lay.n_rigid > 0
+                && out.convergence.is_converged()
+                && lay.n_pairs + lay.n_real + lay.n_rigid > 1
+            {
+                let refine = |p: &Problem, theta: Vec<f64>, ev, dof, l: &Layout| {
+                    iterate(
+                        p,
+                        theta,
+                        ev,
+                        dof,
+                        &cfg.lm,
+                        valid(l.n_pairs),
+                        leaving(l.n_pairs, l.n_real),
+                        &cfg.progress,
+                    )
+                };
+                let test = |keep: usize| {
+                    drop_integrators(
+                        &prob,
+                        &out,
+                        (&lay, n_params),
+                        keep,
+                        &model,
+                        (n * m) as f64,
+                        cfg,
+                        refine,
+                    )
+                };
+                // all of them at once first (one refinement), then the highest alone
+                let all = if lay.n_rigid > 1 && lay.n_pairs + lay.n_real > 0 {
+                    test(0).filter(|s| s.kept.is_some())
+                } else {
+                    None
+                };
+                let Some(step) = all.or_else(|| test(lay.n_rigid - 1)) else {
+                    break;
+                };
+                messages.push(step.message);
+                let Some((prob_d, lay_d, n_params_d, out_d)) = step.kept else {
+                    break;
+                };
+                work = work.add(out_d.work);
                 let held_iterations = out.iterations;
-                out = out_f;
+                out = out_d;
                 out.iterations += held_iterations;
-                prob = prob_f;
-                lay = lay_f;
-                n_params = n_params_f;
+                prob = prob_d;
+                lay = lay_d;
+                n_params = n_params_d;
+            }
+            if delay_freed {
+                break;
+            }
+            delay_freed = true;
+            if held_delay && leaving(lay.n_pairs, lay.n_real)(&out.theta).is_none() {
+                // the delay freed at the adapted structure's optimum (a refinement that
+                // stopped on a pole leaving the stable region is refined again from its
+                // optimum with the pole dropped, and the delay held again)
+                let lay_f = Layout {
+                    delay: true,
+                    ..lay.clone()
+                };
+                let mut theta_f = out.theta.clone();
+                let at = lay_f.delay_index().unwrap_or(theta_f.len());
+                theta_f.insert(at, model.factors.delay_s);
+                let prob_f = prob.with_layout(lay_f.clone(), model.clone());
+                if let Ok(ev) = prob_f.evaluate(&theta_f) {
+                    let n_params_f = lay_f.n_nl() + m * lay_f.n_lin();
+                    let out_f = iterate(
+                        &prob_f,
+                        theta_f,
+                        ev,
+                        (n * m) as f64 - n_params_f as f64 / 2.0,
+                        &cfg.lm,
+                        valid(lay_f.n_pairs),
+                        leaving(lay_f.n_pairs, lay_f.n_real),
+                        &cfg.progress,
+                    );
+                    messages.push(format!(
+                        "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and freed after the structure adaptation: cost {:.4e} -> {:.4e}",
+                        model.factors.delay_s * 1e6,
+                        eval_start_cost,
+                        out.eval.cost,
+                        out_f.eval.cost
+                    ));
+                    work = work.add(out_f.work);
+                    let held_iterations = out.iterations;
+                    out = out_f;
+                    out.iterations += held_iterations;
+                    prob = prob_f;
+                    lay = lay_f;
+                    n_params = n_params_f;
+                }
             }
         }
         let np = lay.n_pairs;
@@ -1009,4 +1079,89 @@ impl MlRefine {
         }
         Ok(fit)
     }
+}
+
+/// One step of the rigid-body re-choice of [`MlConfig::prune_integrators`]: its message,
+/// and the refinement without the integrators when they were dropped.
+struct IntegratorStep {
+    message: String,
+    kept: Option<(Problem, Layout, usize, crate::lm::LmOutcome)>,
+}
+
+/// The integrators `1/s^(keep+1) .. 1/s^k` of the optimum `out` (structure `lay` with
+/// `k` integrators and `n_params` parameters, `observations` complex observations)
+/// tested by the F test of the mode additions: the cost with them dropped and the poles
+/// held (the linear parameters refitted: variable projection) against the optimum's.
+/// Below [`MlConfig::min_f`] the refinement continues without them (`refine`), and they
+/// stay dropped when that refinement converges to a cost they do not significantly
+/// lower. `None` when they explain more, or the problem without them cannot be
+/// evaluated.
+#[allow(clippy::too_many_arguments)]
+fn drop_integrators(
+    prob: &Problem,
+    out: &crate::lm::LmOutcome,
+    (lay, n_params): (&Layout, usize),
+    keep: usize,
+    model: &FrfModel,
+    observations: f64,
+    cfg: &MlConfig,
+    refine: impl Fn(&Problem, Vec<f64>, crate::varpro::Eval, f64, &Layout) -> crate::lm::LmOutcome,
+) -> Option<IntegratorStep> {
+    let k = lay.n_rigid;
+    let lay_d = Layout {
+        n_rigid: keep,
+        ..lay.clone()
+    };
+    let n_params_d = lay_d.n_nl() + lay.m() * lay_d.n_lin();
+    let prob_d = prob.with_layout(lay_d.clone(), model.clone());
+    let ev_d = prob_d.evaluate(&out.theta).ok()?;
+    let dof = observations - n_params as f64 / 2.0;
+    let f_of = |cost_d: f64| {
+        ((cost_d - out.eval.cost) / ((n_params - n_params_d) as f64 / 2.0)) / (out.eval.cost / dof)
+    };
+    let f_held = f_of(ev_d.cost);
+    if f_held.is_nan() || f_held >= cfg.min_f {
+        return None;
+    }
+    let (what, verb) = if keep + 1 == k {
+        (format!("the integrator 1/s^{k}"), "explains")
+    } else {
+        (
+            format!(
+                "the integrators {}",
+                (keep + 1..=k)
+                    .map(|p| format!("1/s^{p}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            "explain",
+        )
+    };
+    let dof_d = observations - n_params_d as f64 / 2.0;
+    let out_d = refine(&prob_d, out.theta.clone(), ev_d, dof_d, &lay_d);
+    let f_refined = f_of(out_d.eval.cost);
+    if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
+        return Some(IntegratorStep {
+            message: format!(
+                "{what} {verb} {f_held:.2} times the noise per parameter with the poles held (< {}), but the refinement without them {} (F = {f_refined:.2}): kept",
+                cfg.min_f,
+                if out_d.convergence.is_converged() {
+                    "ended higher".to_string()
+                } else {
+                    out_d.convergence.describe()
+                }
+            ),
+            kept: None,
+        });
+    }
+    Some(IntegratorStep {
+        message: format!(
+            "{what} {verb} {f_held:.2} times the noise per parameter at the optimum (< {}): dropped, cost {:.4e} -> {:.4e} after {} further iterations (F = {f_refined:.2})",
+            cfg.min_f,
+            out.eval.cost,
+            out_d.eval.cost,
+            out_d.iterations
+        ),
+        kept: Some((prob_d, lay_d, n_params_d, out_d)),
+    })
 }

@@ -130,3 +130,48 @@ fn missed_modes_clear_of_the_others_are_added_together() {
         assert!(ratio < 1.1, "seed {seed}: cost / dof {ratio:.3}\n{msgs}");
     }
 }
+
+/// A start with integrators the plant has not (an initialiser far above the noise level
+/// keeps some that took up part of its misfit; random 20 x 20 plants: two of full rank):
+/// at the optimum they explain about the noise per parameter, and the refinement drops
+/// them. A true rigid body (`1/s^2`) explains far more and stays.
+#[test]
+fn integrators_the_data_do_not_need_are_dropped_and_a_rigid_body_stays() {
+    for (seed, rigid) in [(3u64, false), (11, false), (5, true), (29, true)] {
+        let truth = system(seed, 3, 2, 4, rigid, false);
+        let d = data_floor(&truth, 800, 1e-3, seed);
+        let mut start = perturbed(&truth, 0.002, 0.2, seed);
+        // two integrators, small next to the response at the lowest line
+        start.modal.rigid = vec![
+            faer::Mat::from_fn(3, 2, |i, j| 1e-2 * (1.0 + i as f64 - j as f64)),
+            faer::Mat::from_fn(3, 2, |i, j| 1e-1 * (0.5 + j as f64 - i as f64)),
+        ];
+        if rigid {
+            start.modal.rigid[1] = truth.modal.rigid[1].clone();
+        }
+        let fit = MlRefine::new(MlConfig::default())
+            .estimate(&d, ChainModel::from(start.clone()))
+            .unwrap();
+        let msgs = fit.messages.join("\n");
+        println!("seed {seed}, rigid body {rigid}:\n{msgs}");
+        assert!(fit.convergence.is_converged(), "{:?}", fit.convergence);
+        assert_eq!(
+            fit.model.modal.rigid.len(),
+            if rigid { 2 } else { 0 },
+            "seed {seed}\n{msgs}"
+        );
+        assert!(fit.report.cost_ratio < 1.1, "seed {seed}\n{msgs}");
+        assert_eq!(fit.model.modal.pairs.len(), 4, "seed {seed}\n{msgs}");
+        if !rigid {
+            assert!(msgs.contains("dropped"), "{msgs}");
+        }
+        // without the test the integrators stay
+        let kept = MlRefine::new(MlConfig {
+            prune_integrators: false,
+            ..MlConfig::default()
+        })
+        .estimate(&d, ChainModel::from(start))
+        .unwrap();
+        assert_eq!(kept.model.modal.rigid.len(), 2);
+    }
+}
