@@ -951,6 +951,22 @@ impl MlRefine {
                 hint: "check the data for non-finite values".into(),
             })?;
         let unidentifiable = n_nl > 0 && (cond.is_nan() || cond > cfg.max_condition);
+        if unidentifiable && drops < cfg.unstable_drops && lay.delay_index() == Some(weakest) {
+            // a delay the data do not determine: with complex residues and a feedthrough,
+            // a delay change `d` is taken up to first order by the residues (`-p_k r_k d`)
+            // and the feedthrough (`sum_k r_k d`) of a strictly proper plant, so that
+            // near exact data its information vanishes (a random 4 x 4 plant with 8
+            // modes and relative noise 1e-6: condition 8.9e16); held where it is
+            let mut next = fitted.clone();
+            next.factors.delay_fitted = false;
+            messages.push(format!(
+                "the delay is not determined by the data (information matrix condition {cond:.2e}; with complex residues and a feedthrough it trades with the residues' phases) after {} iterations ({}): held at {:.4} us and refined again; give it with --delay SECONDS if it is known",
+                out.iterations,
+                out.convergence.describe(),
+                fitted.factors.delay_s * 1e6
+            ));
+            return self.estimate_from(data, next, drops + 1, messages);
+        }
         if unidentifiable && drops < cfg.unstable_drops && weakest < 2 * np + lay.n_real {
             // a pole the data do not determine (a spurious real pole running off to
             // infinity, a mode without residue): dropped, and refined again
@@ -1000,7 +1016,30 @@ impl MlRefine {
             })
             .collect();
         let (delay_s, delay_s_std) = match lay.delay_index() {
-            Some(i) => (Some(out.theta[i]), Some(c(i, i).max(0.0).sqrt())),
+            Some(i) => {
+                let fisher = c(i, i).max(0.0).sqrt();
+                let profile = delay_profile(&prob, &out.theta, i, (out.eval.cost, scale), fisher);
+                let mut std = fisher;
+                if profile.half_width > 1.5 * fisher {
+                    std = profile.half_width;
+                    messages.push(format!(
+                        "the delay's profile is flatter than its curvature says: the cost (poles held) rises by 1/2 only {:.3} us from the optimum{}, where the information matrix gives a standard deviation of {:.3} us; reported: {:.3} us (with complex residues and a feedthrough a delay trades with the residues' phases to first order)",
+                        profile.half_width * 1e6,
+                        if profile.reached { "" } else { " (at least: not reached)" },
+                        fisher * 1e6,
+                        std * 1e6
+                    ));
+                }
+                if let Some((d, c)) = profile.lower {
+                    messages.push(format!(
+                        "the cost (poles held) is lower {:.3} us from the returned delay ({:.6e} against {:.6e}): the refinement stopped short of the delay's optimum, where the cost is nearly flat in it",
+                        d * 1e6,
+                        c,
+                        out.eval.cost
+                    ));
+                }
+                (Some(out.theta[i]), Some(std))
+            }
             None => (None, None),
         };
         if !out.convergence.is_converged() {
@@ -1165,3 +1204,82 @@ fn drop_integrators(
         kept: Some((prob_d, lay_d, n_params_d, out_d)),
     })
 }
+
+/// The delay's profile of [`delay_profile`].
+struct DelayProfile {
+    /// The larger of the two offsets from the optimum at which the cost (poles held)
+    /// has risen by 1/2 (the one-standard-deviation interval of a likelihood profile),
+    /// seconds.
+    half_width: f64,
+    /// False when a side did not reach the rise within the search (`half_width` is then
+    /// a lower bound).
+    reached: bool,
+    /// A lower cost found on the way: its offset and cost.
+    lower: Option<(f64, f64)>,
+}
+
+/// The delay's profile with the poles held (the linear parameters refitted at each
+/// delay: variable projection), a cheap stand-in for the likelihood profile: per side,
+/// the offset from the optimum at which the cost over the covariance's `scale` (`-log L`
+/// up to a constant) has risen by 1/2, by doubling from `start` (at most [`PROFILE_DOUBLINGS`] times) and interpolating
+/// linearly in `sqrt(2 dV)`. Holding the poles can only raise the cost, so the offsets
+/// are lower bounds of those of the full profile. Near a quadratic optimum they equal
+/// the standard deviation of the information matrix; where the delay trades with other
+/// parameters to first order the profile is flatter (quartic) and wider.
+fn delay_profile(
+    prob: &Problem,
+    theta: &[f64],
+    i: usize,
+    (cost, scale): (f64, f64),
+    start: f64,
+) -> DelayProfile {
+    let mut half_width: f64 = 0.0;
+    let mut reached = true;
+    let mut lower: Option<(f64, f64)> = None;
+    let step = if start.is_finite() && start > 0.0 {
+        start
+    } else {
+        return DelayProfile {
+            half_width: 0.0,
+            reached: false,
+            lower: None,
+        };
+    };
+    for side in [-1.0, 1.0] {
+        let (mut h_lo, mut r_lo) = (0.0, 0.0);
+        let mut h = step;
+        let mut side_w = None;
+        for _ in 0..=PROFILE_DOUBLINGS {
+            let mut t = theta.to_vec();
+            t[i] += side * h;
+            let Ok(ev) = prob.evaluate(&t) else { break };
+            let c = ev.cost;
+            if c < cost && lower.is_none_or(|(_, lc)| c < lc) {
+                lower = Some((side * h, c));
+            }
+            let r = (2.0 * (c - cost) / scale).max(0.0).sqrt();
+            if r >= 1.0 {
+                side_w = Some(h_lo + (h - h_lo) * (1.0 - r_lo) / (r - r_lo));
+                break;
+            }
+            (h_lo, r_lo) = (h, r);
+            h *= 2.0;
+        }
+        match side_w {
+            Some(w) => half_width = half_width.max(w),
+            None => {
+                reached = false;
+                half_width = half_width.max(h_lo);
+            }
+        }
+    }
+    DelayProfile {
+        half_width,
+        reached,
+        lower,
+    }
+}
+
+/// Most doublings of the step of [`delay_profile`] per side (the search reaches 64
+/// times the information matrix's standard deviation).
+const PROFILE_DOUBLINGS: usize = 6;
