@@ -580,6 +580,20 @@ impl MlRefine {
                 && chi2_upper_tail(2.0 * cost, 2.0 * dof) < 1e-3
                 && cost / dof > 2.0 * expected_ratio(cfg.realizations)
         };
+        // one refinement of `p` (structure `l`, `n_params` parameters) from `theta`,
+        // evaluated as `ev`
+        let refine = |p: &Problem, theta: Vec<f64>, ev, n_params: usize, l: &Layout| {
+            iterate(
+                p,
+                theta,
+                ev,
+                (n * m) as f64 - n_params as f64 / 2.0,
+                &cfg.lm,
+                valid(l.n_pairs),
+                leaving(l.n_pairs, l.n_real),
+                &cfg.progress,
+            )
+        };
         // A free delay is held at the start's value while the start is far above the
         // noise level, through the iterations and the structure adaptation, and freed
         // after them: the delay otherwise absorbs the misfit of the modes the start
@@ -606,16 +620,7 @@ impl MlRefine {
                 (prob, theta, eval0, lay, n_params, false)
             };
         let t_iter = Instant::now();
-        let mut out = iterate(
-            &prob,
-            theta,
-            eval0,
-            (n * m) as f64 - n_params as f64 / 2.0,
-            &cfg.lm,
-            valid(lay.n_pairs),
-            leaving(lay.n_pairs, lay.n_real),
-            &cfg.progress,
-        );
+        let mut out = refine(&prob, theta, eval0, n_params, &lay);
         let mut work = out.work;
         let mut prob = prob;
         let mut lay = lay;
@@ -658,16 +663,7 @@ impl MlRefine {
                 let prob2 = prob.with_layout(lay2.clone(), model.clone());
                 let ev2 = prob2.evaluate(&theta2).ok()?;
                 let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
-                let out2 = iterate(
-                    &prob2,
-                    theta2,
-                    ev2,
-                    dof2,
-                    &cfg.lm,
-                    valid(lay2.n_pairs),
-                    leaving(lay2.n_pairs, lay2.n_real),
-                    &cfg.progress,
-                );
+                let out2 = refine(&prob2, theta2, ev2, n_params2, &lay2);
                 let f_stat = ((out.eval.cost - out2.eval.cost)
                     / ((n_params2 - n_params) as f64 / 2.0))
                     / (out2.eval.cost / dof2);
@@ -746,18 +742,6 @@ impl MlRefine {
                 && out.convergence.is_converged()
                 && lay.n_pairs + lay.n_real + lay.n_rigid > 1
             {
-                let refine = |p: &Problem, theta: Vec<f64>, ev, dof, l: &Layout| {
-                    iterate(
-                        p,
-                        theta,
-                        ev,
-                        dof,
-                        &cfg.lm,
-                        valid(l.n_pairs),
-                        leaving(l.n_pairs, l.n_real),
-                        &cfg.progress,
-                    )
-                };
                 let test = |keep: usize| {
                     drop_integrators(
                         &prob,
@@ -809,16 +793,7 @@ impl MlRefine {
                 let prob_f = prob.with_layout(lay_f.clone(), model.clone());
                 if let Ok(ev) = prob_f.evaluate(&theta_f) {
                     let n_params_f = lay_f.n_nl() + m * lay_f.n_lin();
-                    let out_f = iterate(
-                        &prob_f,
-                        theta_f,
-                        ev,
-                        (n * m) as f64 - n_params_f as f64 / 2.0,
-                        &cfg.lm,
-                        valid(lay_f.n_pairs),
-                        leaving(lay_f.n_pairs, lay_f.n_real),
-                        &cfg.progress,
-                    );
+                    let out_f = refine(&prob_f, theta_f, ev, n_params_f, &lay_f);
                     messages.push(format!(
                         "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and freed after the structure adaptation: cost {:.4e} -> {:.4e}",
                         model.factors.delay_s * 1e6,
@@ -1131,9 +1106,9 @@ struct IntegratorStep {
 /// `k` integrators and `n_params` parameters, `observations` complex observations)
 /// tested by the F test of the mode additions: the cost with them dropped and the poles
 /// held (the linear parameters refitted: variable projection) against the optimum's.
-/// Below [`MlConfig::min_f`] the refinement continues without them (`refine`), and they
-/// stay dropped when that refinement converges to a cost they do not significantly
-/// lower. `None` when they explain more, or the problem without them cannot be
+/// Below [`MlConfig::min_f`] the refinement continues without them (`refine`, given the
+/// parameter count), and they stay dropped when that refinement converges to a cost they
+/// do not significantly lower. `None` when they explain more, or the problem without them cannot be
 /// evaluated.
 #[allow(clippy::too_many_arguments)]
 fn drop_integrators(
@@ -1144,7 +1119,7 @@ fn drop_integrators(
     model: &FrfModel,
     observations: f64,
     cfg: &MlConfig,
-    refine: impl Fn(&Problem, Vec<f64>, crate::varpro::Eval, f64, &Layout) -> crate::lm::LmOutcome,
+    refine: impl Fn(&Problem, Vec<f64>, crate::varpro::Eval, usize, &Layout) -> crate::lm::LmOutcome,
 ) -> Option<IntegratorStep> {
     let k = lay.n_rigid;
     let lay_d = Layout {
@@ -1176,8 +1151,7 @@ fn drop_integrators(
             "explain",
         )
     };
-    let dof_d = observations - n_params_d as f64 / 2.0;
-    let out_d = refine(&prob_d, out.theta.clone(), ev_d, dof_d, &lay_d);
+    let out_d = refine(&prob_d, out.theta.clone(), ev_d, n_params_d, &lay_d);
     let f_refined = f_of(out_d.eval.cost);
     if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
         return Some(IntegratorStep {
