@@ -767,10 +767,7 @@ impl MlRefine {
                 let Some((prob_d, lay_d, n_params_d, out_d)) = step.kept else {
                     break;
                 };
-                work = work.add(out_d.work);
-                let held_iterations = out.iterations;
-                out = out_d;
-                out.iterations += held_iterations;
+                out = continued(out, out_d, &mut work);
                 prob = prob_d;
                 lay = lay_d;
                 n_params = n_params_d;
@@ -801,10 +798,7 @@ impl MlRefine {
                         out.eval.cost,
                         out_f.eval.cost
                     ));
-                    work = work.add(out_f.work);
-                    let held_iterations = out.iterations;
-                    out = out_f;
-                    out.iterations += held_iterations;
+                    out = continued(out, out_f, &mut work);
                     prob = prob_f;
                     lay = lay_f;
                     n_params = n_params_f;
@@ -1093,6 +1087,18 @@ impl MlRefine {
         }
         Ok(fit)
     }
+}
+
+/// The refinement `next` that continued from the optimum `prev` with another structure:
+/// its work added to `work`, and `prev`'s iterations to its own.
+fn continued(
+    prev: crate::lm::LmOutcome,
+    mut next: crate::lm::LmOutcome,
+    work: &mut crate::lm::Work,
+) -> crate::lm::LmOutcome {
+    *work = work.add(next.work);
+    next.iterations += prev.iterations;
+    next
 }
 
 /// One step of the rigid-body re-choice of [`MlConfig::prune_integrators`]: its message,
