@@ -317,10 +317,32 @@ fn the_default_chain_finds_every_mode_of_a_delay_free_20_by_20_plant() {
     );
 }
 
+/// `data` delayed by `tau` (every entry times `exp(-j w tau)`) plus `noise()` per entry
+/// (line after line, entries column-major), with the variance `variance` (`None`: the
+/// data's).
+fn delayed(
+    data: &frf_data::Frf,
+    tau: f64,
+    variance: Option<Vec<f64>>,
+    mut noise: impl FnMut() -> num_complex::Complex64,
+) -> frf_data::Frf {
+    let per_line = data.ny() * data.nu();
+    let mut values = data.values_vec();
+    for (k, &w) in data.omegas().iter().enumerate() {
+        let rot = num_complex::Complex64::from_polar(1.0, -w * tau);
+        for v in values[k * per_line..(k + 1) * per_line].iter_mut() {
+            *v = *v * rot + noise();
+        }
+    }
+    let freq: Vec<f64> = (0..data.n_lines()).map(|k| data.freq_hz(k)).collect();
+    let variance = variance.or_else(|| data.variance_vec());
+    frf_data::Frf::new(freq, data.ny(), data.nu(), values, variance).unwrap()
+}
+
 /// The compressed subspace step (a 12 x 12 plant: more than 100 entries) searches the
 /// delay on the outputs projected onto 8 fixed directions
 /// (`SubspaceConfig::output_directions`), at an eighth of the cost on 50 x 50 data
-/// (18.4 s -> 3.2 s there). A delay the periodogram estimate misses by a fraction of its
+/// (17.6 s -> 3.2 s there). A delay the periodogram estimate misses by a fraction of its
 /// resolution is still moved towards: a random plant (seed 2, 20 modes, 1500 lines,
 /// relative noise 1e-4) delayed by 13.7 us, estimated at 9.95 us and refined to 15.46 us
 /// (on every output: 14.29 us from an estimate of 8.65 us). The subspace poles are not
@@ -339,18 +361,9 @@ fn the_compressed_delay_search_on_projected_outputs_finds_the_delay() {
     })
     .unwrap();
     let tau = 13.7e-6;
-    let m = &r.measured;
-    let omega = m.omegas();
-    let mut values = m.values_vec();
-    let per_line = m.ny() * m.nu();
-    for (k, &w) in omega.iter().enumerate() {
-        let rot = num_complex::Complex64::from_polar(1.0, -w * tau);
-        values[k * per_line..(k + 1) * per_line]
-            .iter_mut()
-            .for_each(|v| *v *= rot);
-    }
-    let freq: Vec<f64> = (0..m.n_lines()).map(|k| m.freq_hz(k)).collect();
-    let data = frf_data::Frf::new(freq, m.ny(), m.nu(), values, m.variance_vec()).unwrap();
+    let data = delayed(&r.measured, tau, None, || {
+        num_complex::Complex64::new(0.0, 0.0)
+    });
     let id = subspace::SubspaceInit::new(subspace::SubspaceConfig::default())
         .identify(&data)
         .unwrap();
@@ -402,21 +415,14 @@ fn delayed_4_by_4(scale: f64) -> (frfit::chain::ChainResult, f64) {
             .wrapping_add(1442695040888963407);
         ((state >> 11) as f64 + 1.0) / (1u64 << 53) as f64
     };
-    let mut values = m.values_vec();
-    for (k, &w) in m.omegas().iter().enumerate() {
-        let rot = num_complex::Complex64::from_polar(1.0, -w * tau);
-        for v in values[k * ny * nu..(k + 1) * ny * nu].iter_mut() {
-            let (u1, u2) = (uniform(), uniform());
-            let noise = num_complex::Complex64::from_polar(
-                (-2.0 * u1.ln()).sqrt() * sd / std::f64::consts::SQRT_2,
-                std::f64::consts::TAU * u2,
-            );
-            *v = *v * rot + noise;
-        }
-    }
-    let freq: Vec<f64> = (0..m.n_lines()).map(|k| m.freq_hz(k)).collect();
-    let var = vec![sd * sd; values.len()];
-    let data = frf_data::Frf::new(freq, ny, nu, values, Some(var)).unwrap();
+    let var = vec![sd * sd; m.n_lines() * ny * nu];
+    let data = delayed(m, tau, Some(var), || {
+        let (u1, u2) = (uniform(), uniform());
+        num_complex::Complex64::from_polar(
+            (-2.0 * u1.ln()).sqrt() * sd / std::f64::consts::SQRT_2,
+            std::f64::consts::TAU * u2,
+        )
+    });
     let settings = ChainSettings {
         delay: DelayChoice::Auto,
         ..Default::default()

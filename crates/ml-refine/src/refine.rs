@@ -87,14 +87,15 @@ pub struct MlConfig {
     /// `min_f` times the noise per parameter (see [`MlRefine`]'s messages). Default:
     /// true.
     pub prune_real_poles: bool,
-    /// With a measured variance, test the highest integrator of the rigid body at the
-    /// optimum (after the structure adaptation and the freed delay): when it explains
-    /// less than `min_f` times the noise per parameter with the poles held (the F test
-    /// of the mode additions, `1/s^k` against `1/s^(k-1)`), it is dropped and the
-    /// refinement continued without it, and the test repeated on the next. An
-    /// initialiser whose start stood far above the noise level keeps integrators that
-    /// took up part of its misfit (random 20 x 20 plants without a rigid body: two, of
-    /// full rank); at the noise level they explain nothing. Default: true.
+    /// With a measured variance, test the integrators of the rigid body at the optimum
+    /// (after the structure adaptation, before a held delay is freed and again after):
+    /// when they explain less than `min_f` times the noise per parameter with the poles
+    /// held (the F test of the mode additions), all of them at once, else the highest
+    /// alone, they are dropped and the refinement continued without them, and the test
+    /// repeated. An initialiser whose start stood far above the noise level keeps
+    /// integrators that took up part of its misfit (random 20 x 20 plants without a
+    /// rigid body: two, of full rank); at the noise level they explain nothing.
+    /// Default: true.
     pub prune_integrators: bool,
     /// Progress callback.
     pub progress: ProgressSink,
@@ -662,11 +663,12 @@ impl MlRefine {
                 theta2.extend_from_slice(&out.theta[2 * np..]);
                 let prob2 = prob.with_layout(lay2.clone(), model.clone());
                 let ev2 = prob2.evaluate(&theta2).ok()?;
-                let dof2 = (n * m) as f64 - n_params2 as f64 / 2.0;
                 let out2 = refine(&prob2, theta2, ev2, n_params2, &lay2);
-                let f_stat = ((out.eval.cost - out2.eval.cost)
-                    / ((n_params2 - n_params) as f64 / 2.0))
-                    / (out2.eval.cost / dof2);
+                let f_stat = nested_f(
+                    (out.eval.cost, n_params),
+                    (out2.eval.cost, n_params2),
+                    (n * m) as f64,
+                );
                 Some((prob2, lay2, n_params2, out2, f_stat))
             };
             let passes = |o: &crate::lm::LmOutcome, f_stat: f64| {
@@ -831,6 +833,10 @@ impl MlRefine {
         }
         let dynamics_stable = fitted.factors.dynamics.iter().all(|d| d.is_stable());
         let w_top = data.omegas().iter().cloned().fold(0.0f64, f64::max);
+        // a pair the data can carry: within 1e4 times the band, not critically damped
+        let pair_supported = |p: &realize::PolePair| {
+            p.pole.im <= 1e4 * w_top && p.pole.im > CRITICAL_IM * p.pole.norm()
+        };
         let far: Vec<String> = fitted
             .modal
             .real_poles
@@ -847,7 +853,7 @@ impl MlRefine {
                     .modal
                     .pairs
                     .iter()
-                    .filter(|p| p.pole.im > 1e4 * w_top || p.pole.im <= CRITICAL_IM * p.pole.norm())
+                    .filter(|p| !pair_supported(p))
                     .map(|p| {
                         if p.pole.im > 1e4 * w_top {
                             format!("mode at {:.3e} Hz, 1e4 times beyond the band", p.f_hz())
@@ -863,11 +869,9 @@ impl MlRefine {
             .collect();
         if !(bad.is_empty() && far.is_empty()) && drops < cfg.unstable_drops && dynamics_stable {
             let mut next = fitted.clone();
-            next.modal.pairs.retain(|p| {
-                p.pole.re < 0.0
-                    && p.pole.im <= 1e4 * w_top
-                    && p.pole.im > CRITICAL_IM * p.pole.norm()
-            });
+            next.modal
+                .pairs
+                .retain(|p| p.pole.re < 0.0 && pair_supported(p));
             next.modal
                 .real_poles
                 .retain(|p| p.pole < 0.0 && p.pole >= -1e4 * w_top);
@@ -988,15 +992,15 @@ impl MlRefine {
             Some(i) => {
                 let fisher = c(i, i).max(0.0).sqrt();
                 let profile = delay_profile(&prob, &out.theta, i, (out.eval.cost, scale), fisher);
-                let mut std = fisher;
+                let mut delay_std = fisher;
                 if profile.half_width > 1.5 * fisher {
-                    std = profile.half_width;
+                    delay_std = profile.half_width;
                     messages.push(format!(
                         "the delay's profile is flatter than its curvature says: the cost (poles held) rises by 1/2 only {:.3} us from the optimum{}, where the information matrix gives a standard deviation of {:.3} us; reported: {:.3} us (with complex residues and a feedthrough a delay trades with the residues' phases to first order)",
                         profile.half_width * 1e6,
                         if profile.reached { "" } else { " (at least: not reached)" },
                         fisher * 1e6,
-                        std * 1e6
+                        delay_std * 1e6
                     ));
                 }
                 if let Some((d, c)) = profile.lower {
@@ -1007,7 +1011,7 @@ impl MlRefine {
                         out.eval.cost
                     ));
                 }
-                (Some(out.theta[i]), Some(std))
+                (Some(out.theta[i]), Some(delay_std))
             }
             None => (None, None),
         };
@@ -1089,6 +1093,15 @@ impl MlRefine {
     }
 }
 
+/// The F statistic of the structure tests (a mode added, integrators dropped): the cost
+/// the larger structure (`large`: cost, parameters) explains beyond the smaller
+/// (`small`), per pair of parameters, over the larger's noise scale `cost / N_dof`, with
+/// `observations` complex observations.
+fn nested_f(small: (f64, usize), large: (f64, usize), observations: f64) -> f64 {
+    let dof = observations - large.1 as f64 / 2.0;
+    ((small.0 - large.0) / ((large.1 - small.1) as f64 / 2.0)) / (large.0 / dof)
+}
+
 /// The refinement `next` that continued from the optimum `prev` with another structure:
 /// its work added to `work`, and `prev`'s iterations to its own.
 fn continued(
@@ -1114,8 +1127,8 @@ struct IntegratorStep {
 /// held (the linear parameters refitted: variable projection) against the optimum's.
 /// Below [`MlConfig::min_f`] the refinement continues without them (`refine`, given the
 /// parameter count), and they stay dropped when that refinement converges to a cost they
-/// do not significantly lower. `None` when they explain more, or the problem without them cannot be
-/// evaluated.
+/// do not significantly lower. `None` when they explain more, or the problem without
+/// them cannot be evaluated.
 #[allow(clippy::too_many_arguments)]
 fn drop_integrators(
     prob: &Problem,
@@ -1135,9 +1148,12 @@ fn drop_integrators(
     let n_params_d = lay_d.n_nl() + lay.m() * lay_d.n_lin();
     let prob_d = prob.with_layout(lay_d.clone(), model.clone());
     let ev_d = prob_d.evaluate(&out.theta).ok()?;
-    let dof = observations - n_params as f64 / 2.0;
     let f_of = |cost_d: f64| {
-        ((cost_d - out.eval.cost) / ((n_params - n_params_d) as f64 / 2.0)) / (out.eval.cost / dof)
+        nested_f(
+            (cost_d, n_params_d),
+            (out.eval.cost, n_params),
+            observations,
+        )
     };
     let f_held = f_of(ev_d.cost);
     if f_held.is_nan() || f_held >= cfg.min_f {
@@ -1201,8 +1217,8 @@ struct DelayProfile {
 /// The delay's profile with the poles held (the linear parameters refitted at each
 /// delay: variable projection), a cheap stand-in for the likelihood profile: per side,
 /// the offset from the optimum at which the cost over the covariance's `scale` (`-log L`
-/// up to a constant) has risen by 1/2, by doubling from `start` (at most [`PROFILE_DOUBLINGS`] times) and interpolating
-/// linearly in `sqrt(2 dV)`. Holding the poles can only raise the cost, so the offsets
+/// up to a constant) has risen by 1/2, by doubling from `start` (at most
+/// [`PROFILE_DOUBLINGS`] times) and interpolating linearly in `sqrt(2 dV)`. Holding the poles can only raise the cost, so the offsets
 /// are lower bounds of those of the full profile. Near a quadratic optimum they equal
 /// the standard deviation of the information matrix; where the delay trades with other
 /// parameters to first order the profile is flatter (quartic) and wider.
@@ -1213,29 +1229,25 @@ fn delay_profile(
     (cost, scale): (f64, f64),
     start: f64,
 ) -> DelayProfile {
-    let mut half_width: f64 = 0.0;
-    let mut reached = true;
-    let mut lower: Option<(f64, f64)> = None;
-    let step = if start.is_finite() && start > 0.0 {
-        start
-    } else {
-        return DelayProfile {
-            half_width: 0.0,
-            reached: false,
-            lower: None,
-        };
+    let mut profile = DelayProfile {
+        half_width: 0.0,
+        reached: start.is_finite() && start > 0.0,
+        lower: None,
     };
+    if !profile.reached {
+        return profile;
+    }
     for side in [-1.0, 1.0] {
         let (mut h_lo, mut r_lo) = (0.0, 0.0);
-        let mut h = step;
+        let mut h = start;
         let mut side_w = None;
         for _ in 0..=PROFILE_DOUBLINGS {
             let mut t = theta.to_vec();
             t[i] += side * h;
             let Ok(ev) = prob.evaluate(&t) else { break };
             let c = ev.cost;
-            if c < cost && lower.is_none_or(|(_, lc)| c < lc) {
-                lower = Some((side * h, c));
+            if c < cost && profile.lower.is_none_or(|(_, lc)| c < lc) {
+                profile.lower = Some((side * h, c));
             }
             let r = (2.0 * (c - cost) / scale).max(0.0).sqrt();
             if r >= 1.0 {
@@ -1245,19 +1257,10 @@ fn delay_profile(
             (h_lo, r_lo) = (h, r);
             h *= 2.0;
         }
-        match side_w {
-            Some(w) => half_width = half_width.max(w),
-            None => {
-                reached = false;
-                half_width = half_width.max(h_lo);
-            }
-        }
+        profile.reached &= side_w.is_some();
+        profile.half_width = profile.half_width.max(side_w.unwrap_or(h_lo));
     }
-    DelayProfile {
-        half_width,
-        reached,
-        lower,
-    }
+    profile
 }
 
 /// Most doublings of the step of [`delay_profile`] per side (the search reaches 64

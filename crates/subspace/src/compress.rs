@@ -60,36 +60,7 @@ pub fn compress_inputs<D: FrfDataset + ?Sized>(
     data: &D,
     v: &Mat<f64>,
 ) -> Result<Frf, SubspaceError> {
-    let (ny, nu, nl, k) = (data.ny(), data.nu(), data.n_lines(), v.ncols());
-    if v.nrows() != nu {
-        return Err(SubspaceError::invalid(
-            "input directions",
-            format!("{} x {k}", v.nrows()),
-            format!("the data have {nu} inputs"),
-        ));
-    }
-    let g = data.values_vec();
-    let var = data.variance_vec();
-    let (m, mc) = (ny * nu, ny * k);
-    let mut values = vec![C64::new(0.0, 0.0); nl * mc];
-    let mut variance = var.as_ref().map(|_| vec![0.0; nl * mc]);
-    for line in 0..nl {
-        for l in 0..k {
-            for j in 0..nu {
-                let c = v[(j, l)];
-                for i in 0..ny {
-                    values[line * mc + l * ny + i] += g[line * m + j * ny + i] * c;
-                    if let (Some(out), Some(src)) = (variance.as_mut(), var.as_ref()) {
-                        out[line * mc + l * ny + i] += c * c * src[line * m + j * ny + i];
-                    }
-                }
-            }
-        }
-    }
-    let freq: Vec<f64> = (0..nl).map(|line| data.freq_hz(line)).collect();
-    let mut out = Frf::new(freq, ny, k, values, variance)?;
-    out.units = data.units().map(str::to_string);
-    Ok(out)
+    project(data, v, Side::Inputs)
 }
 
 /// The data with the outputs projected onto the columns of `u` (`ny x k`): `U^T G(w)`,
@@ -100,39 +71,71 @@ pub fn compress_outputs<D: FrfDataset + ?Sized>(
     data: &D,
     u: &Mat<f64>,
 ) -> Result<Frf, SubspaceError> {
-    let (ny, nu, nl, k) = (data.ny(), data.nu(), data.n_lines(), u.ncols());
-    if u.nrows() != ny {
+    project(data, u, Side::Outputs)
+}
+
+/// The side of the data [`project`] projects.
+#[derive(Clone, Copy)]
+enum Side {
+    Inputs,
+    Outputs,
+}
+
+/// The data with the inputs (`G V`, `v` is `nu x k`) or the outputs (`V^T G`, `v` is
+/// `ny x k`) projected onto the columns of `v`, with the variance `sum_q v_ql^2 var` of
+/// each projected entry when the data carry one.
+fn project<D: FrfDataset + ?Sized>(
+    data: &D,
+    v: &Mat<f64>,
+    side: Side,
+) -> Result<Frf, SubspaceError> {
+    let (ny, nu, nl, k) = (data.ny(), data.nu(), data.n_lines(), v.ncols());
+    let (n, what) = match side {
+        Side::Inputs => (nu, "input"),
+        Side::Outputs => (ny, "output"),
+    };
+    if v.nrows() != n {
         return Err(SubspaceError::invalid(
-            "output directions",
-            format!("{} x {k}", u.nrows()),
-            format!("the data have {ny} outputs"),
+            &format!("{what} directions"),
+            format!("{} x {k}", v.nrows()),
+            format!("the data have {n} {what}s"),
         ));
     }
+    // the projected data's outputs and inputs
+    let (py, pu) = match side {
+        Side::Inputs => (ny, k),
+        Side::Outputs => (k, nu),
+    };
     let g = data.values_vec();
     let var = data.variance_vec();
-    let (m, mc) = (ny * nu, k * nu);
+    let (m, mc) = (ny * nu, py * pu);
     let mut values = vec![C64::new(0.0, 0.0); nl * mc];
     let mut variance = var.as_ref().map(|_| vec![0.0; nl * mc]);
     for line in 0..nl {
-        for j in 0..nu {
-            for l in 0..k {
-                let (mut s, mut v) = (C64::new(0.0, 0.0), 0.0);
-                for o in 0..ny {
-                    let c = u[(o, l)];
-                    s += g[line * m + j * ny + o] * c;
+        for b in 0..pu {
+            for a in 0..py {
+                let (mut s, mut sv) = (C64::new(0.0, 0.0), 0.0);
+                for q in 0..n {
+                    // direction `l` and the source entry summed over `q`
+                    let (l, e) = match side {
+                        Side::Inputs => (b, q * ny + a),
+                        Side::Outputs => (a, b * ny + q),
+                    };
+                    let c = v[(q, l)];
+                    s += g[line * m + e] * c;
                     if let Some(src) = var.as_ref() {
-                        v += c * c * src[line * m + j * ny + o];
+                        sv += c * c * src[line * m + e];
                     }
                 }
-                values[line * mc + j * k + l] = s;
+                values[line * mc + b * py + a] = s;
                 if let Some(out) = variance.as_mut() {
-                    out[line * mc + j * k + l] = v;
+                    out[line * mc + b * py + a] = sv;
                 }
             }
         }
     }
     let freq: Vec<f64> = (0..nl).map(|line| data.freq_hz(line)).collect();
-    let mut out = Frf::new(freq, k, nu, values, variance)?;
+    let mut out = Frf::new(freq, py, pu, values, variance)?;
     out.units = data.units().map(str::to_string);
     Ok(out)
 }

@@ -608,10 +608,7 @@ impl SubspaceInit {
                 factors: &cur.model.factors,
             };
             // the start: the subspace model, or its poles' residue refit on the projection
-            let start_projected = match projected {
-                Some(_) => Some(dc.at(tau_div)?),
-                None => None,
-            };
+            let start_projected = projected.as_ref().map(|_| dc.at(tau_div)).transpose()?;
             let (start_model, start_cost) = match &start_projected {
                 Some(p) => (&p.model, p.cost),
                 None => (&cur.model, cur.report.cost),
