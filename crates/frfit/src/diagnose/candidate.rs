@@ -390,6 +390,11 @@ fn numerator_shares(s: &additive_riv::Submodel, rows: bool) -> Vec<f64> {
     v
 }
 
+/// Relative frequency within which two screened second-order starts of
+/// [`local_modes`] are the same factor: the last grid step of [`screen_second_order`]
+/// (`0.08 / 9` in log frequency).
+const SAME_FACTOR: f64 = 0.01;
+
 /// Second-order factor candidates from the model itself: a mode whose numerator lives
 /// in one output row (or one input column), at least `LOCAL_SHARE` of its energy, where
 /// the residual concentrates (the dominant row or column of the residual), is what a
@@ -441,9 +446,14 @@ fn local_modes(
         let Some((f_hz, zeta)) = screen_second_order(&base, target, f, z, fd) else {
             continue;
         };
-        // two modes of the row that screen to nearly the same factor (a resonance the
-        // first fit split in two) are one candidate
-        if out.iter().any(|(_, s)| (s.f_hz / f_hz - 1.0).abs() < 0.05) {
+        // two modes of the row that screen to the same factor (a resonance the first fit
+        // split in two), within the screen's last grid step (about 1 %), are one
+        // candidate; factors a few per cent apart are not (a resonance 3 % below a plate
+        // mode whose row-3 twin screens to the plate mode: the two must both be tried)
+        if out
+            .iter()
+            .any(|(_, s)| (s.f_hz / f_hz - 1.0).abs() < SAME_FACTOR)
+        {
             continue;
         }
         out.push((

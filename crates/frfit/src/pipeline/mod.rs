@@ -21,7 +21,7 @@ mod first_fit;
 mod summarize;
 
 pub use context::FitContext;
-pub use first_fit::{chain_fit, first_fit, FirstFit};
+pub use first_fit::{chain_fit, first_fit, FirstFit, SECOND_START, SECOND_START_RESIDUAL};
 pub(crate) use summarize::error_stats;
 pub use summarize::final_model_summary;
 
@@ -323,7 +323,7 @@ pub fn run(
         delay: delay_restart,
     } = if cfg.diagnose && cfg.start_model.is_none() {
         let t = Instant::now();
-        let r = better_first_fit(&ctx, cfg, fit, speculative)?;
+        let r = better_first_fit(&ctx, cfg, fit, speculative, fitter_report.cmif_peaks.len())?;
         timings.stage("restart", t);
         r
     } else {
