@@ -117,7 +117,8 @@ fn feedthrough_with_resonance(seed: u64, f_r: f64) {
 /// modes (the tenth, 890.9 Hz): the factor, not a second mode, on its row.
 #[test]
 fn a_sensor_resonance_near_a_mode() {
-    resonance_near_a_mode(3, 9, 1.03);
+    let out = resonance_near_a_mode(3, 9, 1.03);
+    assert!(out.summary.initial.restart.is_none(), "no restart");
 }
 
 /// The same 3 % below the seventh mode (713.2 Hz) of another plate (seed 5). The CMIF
@@ -127,10 +128,34 @@ fn a_sensor_resonance_near_a_mode() {
 /// unstable, which the trial removes as redundant.
 #[test]
 fn a_sensor_resonance_just_below_a_mode_of_another_plate() {
-    resonance_near_a_mode(5, 6, 0.97);
+    let out = resonance_near_a_mode(5, 6, 0.97);
+    // the first fit the loop started from is the common-denominator restart's (a better
+    // first fit, not a step)
+    let restart = out.summary.initial.restart.as_ref().expect("a restart");
+    println!(
+        "  restart from {} ({} modes replaced)",
+        restart.from, restart.replaced_modes
+    );
+    assert!(
+        restart.from.starts_with("the sk -> riv chain"),
+        "{}",
+        restart.from
+    );
+    assert!(restart.f_statistic > restart.f_critical);
 }
 
-fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64) {
+/// The same below the seventh mode of a third plate (seed 4, 703.0 Hz): its first fit
+/// also lost modes (11 from 16 CMIF peaks) and is restarted. Of seven plates (seeds 1,
+/// 2, 4, 5, 6, 7, 8) with the resonance 3 % below their seventh mode, five end
+/// noise-limited with the factor and the plate's modes; seeds 2 and 7 find the factor
+/// (701.01 and 722.60 Hz, zeta 0.0300) but end one and two high modes short.
+#[test]
+fn a_sensor_resonance_just_below_a_mode_of_a_third_plate() {
+    let out = resonance_near_a_mode(4, 6, 0.97);
+    assert!(out.summary.initial.restart.is_some(), "a restart");
+}
+
+fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64) -> PipelineOutput {
     let plate = experiment::synth::WaferStage::build(&experiment::synth::WaferStageConfig {
         seed,
         ..Default::default()
@@ -159,6 +184,7 @@ fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64) {
         "the plate's modes"
     );
     assert_near_truth(&out, &clean);
+    out
 }
 
 /// A sensor-mount resonance on output 2 at 2.9 kHz (damping 0.03), above the band's
