@@ -179,7 +179,7 @@ fn without_redundant_modes(
         return None;
     }
     // the highest index first, so that the others keep theirs
-    unstable.sort_unstable_by(|a, b| b.0.cmp(&a.0));
+    unstable.sort_unstable_by_key(|u| std::cmp::Reverse(u.0));
     let mut m = model.clone();
     for &(k, _, _) in &unstable {
         m.remove_submodel(k);
