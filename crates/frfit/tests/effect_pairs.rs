@@ -117,7 +117,7 @@ fn feedthrough_with_resonance(seed: u64, f_r: f64) {
 /// modes (the tenth, 890.9 Hz): the factor, not a second mode, on its row.
 #[test]
 fn a_sensor_resonance_near_a_mode() {
-    let out = resonance_near_a_mode(3, 9, 1.03);
+    let out = resonance_near_a_mode(3, 9, 1.03, false);
     assert!(out.summary.initial.restart.is_none(), "no restart");
 }
 
@@ -128,7 +128,7 @@ fn a_sensor_resonance_near_a_mode() {
 /// unstable, which the trial removes as redundant.
 #[test]
 fn a_sensor_resonance_just_below_a_mode_of_another_plate() {
-    let out = resonance_near_a_mode(5, 6, 0.97);
+    let out = resonance_near_a_mode(5, 6, 0.97, false);
     // the first fit the loop started from is the common-denominator restart's (a better
     // first fit, not a step)
     let restart = out.summary.initial.restart.as_ref().expect("a restart");
@@ -145,17 +145,37 @@ fn a_sensor_resonance_just_below_a_mode_of_another_plate() {
 }
 
 /// The same below the seventh mode of a third plate (seed 4, 703.0 Hz): its first fit
-/// also lost modes (11 from 16 CMIF peaks) and is restarted. Of seven plates (seeds 1,
-/// 2, 4, 5, 6, 7, 8) with the resonance 3 % below their seventh mode, five end
-/// noise-limited with the factor and the plate's modes; seeds 2 and 7 find the factor
-/// (701.01 and 722.60 Hz, zeta 0.0300) but end one and two high modes short.
+/// also lost modes (11 from 16 CMIF peaks) and is restarted.
 #[test]
 fn a_sensor_resonance_just_below_a_mode_of_a_third_plate() {
-    let out = resonance_near_a_mode(4, 6, 0.97);
+    let out = resonance_near_a_mode(4, 6, 0.97, false);
     assert!(out.summary.initial.restart.is_some(), "a restart");
 }
 
-fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64) -> PipelineOutput {
+/// The same below the seventh mode of a fourth plate (seed 7, 745.0 Hz): its first fit
+/// lost no modes (15 from 15 CMIF peaks: no restart), and after the factor the two
+/// modes it missed at 1466 and 1561 Hz, 6 % apart, raise each other's local residual
+/// median so that the residual's peak test proposes neither; the round with nothing
+/// else to propose tests the modes the common-denominator start holds.
+#[test]
+fn a_sensor_resonance_below_a_mode_and_two_close_missed_modes() {
+    let out = resonance_near_a_mode(7, 6, 0.97, true);
+    assert!(out.summary.initial.restart.is_none(), "no restart");
+    let added: Vec<f64> = common::accepted(&out, "missed_mode")
+        .iter()
+        .filter_map(|s| s.params["f_hz"].as_f64())
+        .collect();
+    for f in [1466.4, 1560.7] {
+        assert!(
+            added.iter().any(|a| (a / f - 1.0).abs() < 0.01),
+            "a missed mode at {f} Hz: {added:?}"
+        );
+    }
+}
+
+/// `missed_modes`: whether the loop may add modes the first fit missed (the plate's
+/// own, beside the factor).
+fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64, missed_modes: bool) -> PipelineOutput {
     let plate = experiment::synth::WaferStage::build(&experiment::synth::WaferStageConfig {
         seed,
         ..Default::default()
@@ -176,6 +196,9 @@ fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64) -> PipelineOutput {
     let out = common::diagnose(&data, "sensor resonance near a mode", ModeSelection::Auto);
     common::assert_output_resonance(&out, 3, f_r, zeta);
     for e in ["delay", "feedthrough", "input_dynamics", "missed_mode"] {
+        if e == "missed_mode" && missed_modes {
+            continue;
+        }
         assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
     assert_eq!(

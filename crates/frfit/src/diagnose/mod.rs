@@ -80,6 +80,10 @@ struct State {
     restart_tested: bool,
     /// The delay restart made before the loop ([`better_first_fit`]), for round 1.
     delay_restart: Option<DelayRestart>,
+    /// The common-denominator start of the band, made once when a round first has
+    /// nothing to propose ([`trial::common_denominator_modes`]); `Some(None)` when it
+    /// failed.
+    sk_start: Option<Option<AdditiveModel>>,
     n_tests: usize,
     n_accepted: usize,
     /// The cost increase over the first fit that the accepted suspended-body readings
@@ -134,6 +138,7 @@ pub fn diagnose(
         analysis,
         tested: Vec::new(),
         restart_tested: false,
+        sk_start: None,
         delay_restart,
         n_tests: 0,
         n_accepted: 0,
@@ -293,14 +298,40 @@ fn round(
         &st.tested,
         ctx.data_delay_s(),
     );
-    if proposals.is_empty() {
-        return None;
-    }
     let current = Current {
         model: &st.model,
         cost: st.cost,
         stats: &stats,
     };
+    if proposals.is_empty() {
+        // nothing proposed while the residual is significant: the modes a common
+        // denominator sees that the model lacks
+        let sk = st
+            .sk_start
+            .get_or_insert_with(|| {
+                let c = PipelineConfig {
+                    init: crate::pipeline::SECOND_START.to_string(),
+                    refine: "none".to_string(),
+                    ..cfg.clone()
+                };
+                crate::pipeline::chain_fit(ctx, &c, &ctx.quiet_fitter_config(&c))
+                    .ok()
+                    .map(|f| f.fit.model)
+            })
+            .as_ref()?;
+        cfg.progress.step(
+            "diagnose",
+            st.n_tests + 1,
+            None,
+            None,
+            format!(
+                "round {}: testing the common-denominator start's modes",
+                st.n_accepted + 1
+            ),
+        );
+        st.n_tests += 1;
+        return trial::common_denominator_modes(ctx, cfg, riv, &current, sk).map(|t| vec![t]);
+    }
     let round_no = st.n_accepted + 1;
     let n_tests = std::sync::atomic::AtomicUsize::new(st.n_tests);
     let progress = |what: String| {
