@@ -331,7 +331,8 @@ pub fn common_denominator_modes(
         aug = additive_riv::augment::with_mode(&aug, f, z).ok()?;
     }
     let r = refit(aug, fd, riv).ok()?;
-    if !(r.cost < current.cost) {
+    // a NaN cost lowers nothing either
+    if r.cost.is_nan() || r.cost >= current.cost {
         return None;
     }
     let added = r
