@@ -32,6 +32,8 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     let data = load_data(&args.data)?;
     check_weighting(&args.opts, data.has_variance())?;
     let mut cfg = args.opts.pipeline_config();
+    // the verdict and the floor comparison are the report's; `fit` prints neither
+    cfg.final_analysis = args.report.is_some();
     let (sink, bar) = progress(quiet);
     cfg.progress = sink;
     let out = pipeline::run(&data, &args.data.display().to_string(), &cfg, "fit");

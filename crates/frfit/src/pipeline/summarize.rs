@@ -304,8 +304,9 @@ pub(crate) struct RunRecord<'a> {
     pub steps: Vec<StepSummary>,
     /// The final fit.
     pub fit: &'a Fit<AdditiveModel>,
-    /// The residual analysis of the final model.
-    pub analysis: &'a ResidualAnalysis,
+    /// The residual analysis of the final model; `None` when
+    /// [`PipelineConfig::final_analysis`] is off.
+    pub analysis: Option<&'a ResidualAnalysis>,
     /// The same against the variance raised to the local line-to-line floor, when the floor
     /// exceeds the variance and the residual is significant against the variance.
     pub floor_analysis: Option<&'a ResidualAnalysis>,
@@ -356,12 +357,18 @@ pub(crate) fn ml_uncertainty(links: &[frf_data::LinkReport]) -> Option<Uncertain
 pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunRecord) -> Summary {
     let band = &ctx.band;
     let noise = &ctx.noise;
-    let (verdict, verdict_evidence) = verdict(
-        run.analysis,
-        run.floor_analysis,
-        run.distortion.as_ref(),
-        &run.final_errors,
-    );
+    let (verdict, verdict_evidence) = match run.analysis {
+        Some(a) => verdict(
+            a,
+            run.floor_analysis,
+            run.distortion.as_ref(),
+            &run.final_errors,
+        ),
+        None => (
+            super::NOT_ANALYSED,
+            "the final residual analysis was not run (`frfit fit` without `--report`)".into(),
+        ),
+    };
     Summary {
         schema: SCHEMA.into(),
         version: VERSION,
@@ -402,7 +409,11 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
         final_model: final_model_summary(run.fit),
         final_errors: run.final_errors,
         data_noise_median_rel: matches!(noise.source, NoiseSource::Measured)
-            .then_some(run.analysis.median_noise_rel)
+            .then(|| {
+                // the analysis reads it from the same noise and band
+                run.analysis
+                    .map_or_else(|| noise.median_relative(band), |a| a.median_noise_rel)
+            })
             .filter(|v| v.is_finite()),
         timings: run.timings,
         chain: run.chain,
