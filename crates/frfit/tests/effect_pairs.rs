@@ -1,6 +1,7 @@
 //! Pairs of effects the nominal model does not declare, on the simulated wafer stage
-//! (seed 3, lines 1 Hz apart up to 2 kHz, 4 periods x 10 realizations, exact response
-//! known; issue 12's must-show): a suspension with a missed mode, a feedthrough with a
+//! (seed 3, and for the resonance below a mode the plates of seeds 4, 5 and 7; lines
+//! 1 Hz apart up to 2 kHz, 4 periods x 10 realizations, exact response known; issue
+//! 12's must-show): a suspension with a missed mode, a feedthrough with a
 //! sensor-mount resonance, and a sensor resonance inside the band near a mode and one
 //! above the band. The loop must name each effect and end within 1e-4 (median relative,
 //! over all lines) of the noiseless response.
@@ -122,8 +123,8 @@ fn a_sensor_resonance_near_a_mode() {
 }
 
 /// The same 3 % below the seventh mode (713.2 Hz) of another plate (seed 5). The CMIF
-/// start's first fit ends far from the noise there (8 of the 17 modes, 1165 times the
-/// noise); the restart from the common-denominator start keeps the modes, and the
+/// start's first fit ends far from the noise there (8 of the 17 modes after the delay
+/// restart, 2460 times the noise); the restart from the common-denominator start keeps the modes, and the
 /// factor's refit leaves the twin of the 713.2 Hz mode that held the row's phase
 /// unstable, which the trial removes as redundant.
 #[test]
