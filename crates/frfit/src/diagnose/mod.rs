@@ -80,9 +80,9 @@ struct State {
     restart_tested: bool,
     /// The delay restart made before the loop ([`better_first_fit`]), for round 1.
     delay_restart: Option<DelayRestart>,
-    /// The common-denominator start of the band, made once when a round first has
-    /// nothing to propose ([`trial::common_denominator_modes`]); `Some(None)` when it
-    /// failed.
+    /// The common-denominator start of the band: the restart's, or made once when a
+    /// round first has nothing to propose ([`trial::common_denominator_modes`]);
+    /// `Some(None)` when it failed.
     sk_start: Option<Option<AdditiveModel>>,
     n_tests: usize,
     n_accepted: usize,
@@ -107,13 +107,15 @@ impl State {
 
 /// Runs the diagnosis loop from `first` (the first fit of `ctx.band`, whose response
 /// at the band's lines is `first_response`); `delay_restart` is the delay restart that
-/// [`better_first_fit`] made already, if any.
+/// [`better_first_fit`] made already, if any, and `sk_start` the common-denominator
+/// start it made, if any.
 pub fn diagnose(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     first: Fit<AdditiveModel>,
     first_response: &ResponseGrid,
     delay_restart: Option<DelayRestart>,
+    sk_start: Option<AdditiveModel>,
 ) -> Result<Diagnosis, FrfitError> {
     let mut fit = first;
     let fd = &ctx.fit_data;
@@ -138,7 +140,7 @@ pub fn diagnose(
         analysis,
         tested: Vec::new(),
         restart_tested: false,
-        sk_start: None,
+        sk_start: sk_start.map(Some),
         delay_restart,
         n_tests: 0,
         n_accepted: 0,
@@ -309,12 +311,7 @@ fn round(
         let sk = st
             .sk_start
             .get_or_insert_with(|| {
-                let c = PipelineConfig {
-                    init: crate::pipeline::SECOND_START.to_string(),
-                    refine: "none".to_string(),
-                    ..cfg.clone()
-                };
-                crate::pipeline::chain_fit(ctx, &c, &ctx.quiet_fitter_config(&c))
+                restart::common_denominator_start(ctx, cfg, "none")
                     .ok()
                     .map(|f| f.fit.model)
             })

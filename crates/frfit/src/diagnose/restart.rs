@@ -13,9 +13,9 @@
 //! - the `delay` step is the restart with the delay refined, tested against the held
 //!   refit too: it passes only when the delay itself explains more than noise.
 
-use super::trial::{f_test, model_cost, new_modes};
+use super::trial::{f_test, lacked_light_modes, light_in_band, model_cost};
 use crate::pipeline::{
-    chain_fit, err, FitContext, PipelineConfig, SECOND_START, SECOND_START_RESIDUAL,
+    chain_fit, err, FirstFit, FitContext, PipelineConfig, SECOND_START, SECOND_START_RESIDUAL,
 };
 use crate::summary::RestartSummary;
 use crate::FrfitError;
@@ -87,6 +87,26 @@ pub struct Restarted {
     pub summary: Option<RestartSummary>,
     /// The delay restart, for the loop's `delay` trial (computed once).
     pub delay: Option<DelayRestart>,
+    /// The common-denominator start alone ([`common_denominator_start`]), when the
+    /// restart of a first fit that lost modes made it: the loop's common-denominator
+    /// modes read the same start.
+    pub sk_start: Option<AdditiveModel>,
+}
+
+/// The [`SECOND_START`] (common-denominator) initialiser on the band of `ctx`, refined
+/// by `refine` (`"none"`: the start alone, a second or two on the wafer stage), quietly,
+/// with the run's hold, delay and weighting.
+pub(super) fn common_denominator_start(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    refine: &str,
+) -> Result<FirstFit, FrfitError> {
+    let c = PipelineConfig {
+        init: SECOND_START.to_string(),
+        refine: refine.to_string(),
+        ..cfg.clone()
+    };
+    chain_fit(ctx, &c, &ctx.quiet_fitter_config(&c))
 }
 
 /// The delay the first fit will hold when the data's own delay estimate is far enough
@@ -145,6 +165,7 @@ fn delay_restarted(
         fit,
         summary: None,
         delay: None,
+        sk_start: None,
     };
     if first.model.factor.fit_delay {
         return Ok(unchanged(first));
@@ -182,6 +203,7 @@ fn delay_restarted(
             fit: first,
             summary: None,
             delay: Some(restart),
+            sk_start: None,
         });
     };
     let added = held
@@ -195,6 +217,7 @@ fn delay_restarted(
             fit: first,
             summary: None,
             delay: Some(restart),
+            sk_start: None,
         });
     }
     let before = crate::pipeline::error_stats(&ctx.band, &response, &ctx.noise);
@@ -229,14 +252,9 @@ fn delay_restarted(
         fit,
         summary: Some(summary),
         delay: Some(restart),
+        sk_start: None,
     })
 }
-
-/// Damping below which a mode of the common-denominator start counts as a structural
-/// mode the first fit may have lost ([`common_denominator_restart`]); the poles a common
-/// denominator spends on an undeclared lag, feedthrough or delay are far more damped or
-/// lie beyond the band.
-const LIGHT_DAMPING: f64 = 0.1;
 
 /// Lightly damped modes in the band that the common-denominator start must hold beyond
 /// the first fit's for [`common_denominator_restart`] to replace it: one missed mode is
@@ -265,7 +283,7 @@ const MIN_RECOVERED: usize = 2;
 ///   modes for an undeclared delay, or fits a distorted measurement with the modes
 ///   its CMIF shows, lost none);
 /// - the start alone (no refinement: a second or two) must hold at least
-///   [`MIN_RECOVERED`] more lightly damped modes (damping below [`LIGHT_DAMPING`]) in
+///   [`MIN_RECOVERED`] more lightly damped modes (damping below [`super::trial::LIGHT_DAMPING`]) in
 ///   the band than the first fit, or the refinement is not run;
 /// - the refined restart replaces the first fit when it still holds that many more, is
 ///   significantly better (the F test of [`better_first_fit`]) and also fits better
@@ -291,44 +309,44 @@ fn common_denominator_restart(
     if !cfg.init.trim().is_empty() || init != "cmif" {
         return Ok(restarted);
     }
+    // the count of lost modes first: it needs no response
+    if cmif_peaks.saturating_sub(restarted.fit.model.modes().len()) < MIN_RECOVERED {
+        return Ok(restarted);
+    }
     let Restarted {
         mut fit,
         summary,
         delay,
+        sk_start: _,
     } = restarted;
-    let kept = |fit, summary, delay| {
+    let kept = |fit, summary, delay, sk_start| {
         Ok(Restarted {
             fit,
             summary,
             delay,
+            sk_start,
         })
     };
     let response = fit.model.response_at(&ctx.omega);
     let before = crate::pipeline::error_stats(&ctx.band, &response, ctx.judging_noise());
-    let lost = cmif_peaks.saturating_sub(fit.model.modes().len());
-    if before.residual_to_noise.is_nan()
-        || before.residual_to_noise <= SECOND_START_RESIDUAL
-        || lost < MIN_RECOVERED
-    {
-        return kept(fit, summary, delay);
+    if before.residual_to_noise.is_nan() || before.residual_to_noise <= SECOND_START_RESIDUAL {
+        return kept(fit, summary, delay, None);
     }
-    let (lo, hi) = ctx.fit_data.band_hz;
+    let band = ctx.fit_data.band_hz;
     let light = |m: &AdditiveModel| -> usize {
         m.modes()
             .iter()
-            .filter(|x| x.zeta > 0.0 && x.zeta < LIGHT_DAMPING && x.f_hz >= lo && x.f_hz <= hi)
+            .filter(|x| light_in_band(x.f_hz, x.zeta, band))
             .count()
     };
     let n_first = light(&fit.model);
     // the lightly damped modes in the band beyond the first fit's, and those of them it
-    // lacks (none of its modes within 3 %)
+    // lacks
     let recovered = |m: &AdditiveModel| -> (usize, Vec<(f64, f64)>) {
-        let more = light(m).saturating_sub(n_first);
-        let which = new_modes(&fit.model, m)
-            .into_iter()
-            .filter(|&(f, z)| z > 0.0 && z < LIGHT_DAMPING && f >= lo && f <= hi)
-            .collect();
-        (more, which)
+        (
+            light(m).saturating_sub(n_first),
+            lacked_light_modes(&fit.model, m, band),
+        )
     };
     let list = |v: &[(f64, f64)]| -> String {
         v.iter()
@@ -336,44 +354,36 @@ fn common_denominator_restart(
             .collect::<Vec<_>>()
             .join(", ")
     };
-    let run = |refine: &str| {
-        let c = PipelineConfig {
-            init: SECOND_START.to_string(),
-            refine: refine.to_string(),
-            ..cfg.clone()
-        };
-        chain_fit(ctx, &c, &ctx.quiet_fitter_config(&c))
-    };
     let lead = format!(
         "first fit: {:.1} times the noise level ({} modes from {cmif_peaks} CMIF peaks)",
         before.residual_to_noise,
         fit.model.modes().len()
     );
     // the start alone first: a second or two, where the refinement costs tens
-    let start = match run("none") {
-        Ok(s) => s,
+    let start = match common_denominator_start(ctx, cfg, "none") {
+        Ok(s) => s.fit.model,
         Err(e) => {
             fit.messages.push(format!(
                 "{lead}; the {SECOND_START} start failed ({e}): no restart from it"
             ));
-            return kept(fit, summary, delay);
+            return kept(fit, summary, delay, None);
         }
     };
-    let (more_in_start, in_start) = recovered(&start.fit.model);
+    let (more_in_start, in_start) = recovered(&start);
     if more_in_start < MIN_RECOVERED {
         fit.messages.push(format!(
             "{lead}; the {SECOND_START} start holds {more_in_start} lightly damped mode(s) in the band beyond its {n_first} (a restart needs {MIN_RECOVERED}): not restarted"
         ));
-        return kept(fit, summary, delay);
+        return kept(fit, summary, delay, Some(start));
     }
     let fd = &ctx.fit_data;
-    let chain = match run(&refine) {
+    let chain = match common_denominator_start(ctx, cfg, &refine) {
         Ok(c) => c,
         Err(e) => {
             fit.messages.push(format!(
                 "{lead}; the restart from the {SECOND_START} start failed ({e}): the first fit is kept"
             ));
-            return kept(fit, summary, delay);
+            return kept(fit, summary, delay, Some(start));
         }
     };
     let cost = model_cost(&fit.model, fd);
@@ -407,7 +417,7 @@ fn common_denominator_restart(
             list(&in_start),
             chain.fit.model.modes().len()
         ));
-        return kept(fit, summary, delay);
+        return kept(fit, summary, delay, Some(start));
     }
     let from = match &summary {
         Some(s) => format!("{from} (after a restart from {})", s.from),
@@ -438,5 +448,6 @@ fn common_denominator_restart(
         fit: new_fit,
         summary: Some(new_summary),
         delay,
+        sk_start: Some(start),
     })
 }

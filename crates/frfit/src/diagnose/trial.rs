@@ -296,9 +296,30 @@ pub fn joint_missed_modes(
     })
 }
 
-/// Damping below which a pole pair of the common-denominator start counts as a
-/// structural mode in [`common_denominator_modes`].
-const SK_LIGHT_DAMPING: f64 = 0.1;
+/// Damping below which a mode of the common-denominator start counts as a structural
+/// mode the model may lack ([`common_denominator_modes`] and the restart of a first fit
+/// that lost modes, [`super::restart`]): the poles a common denominator spends on an
+/// undeclared lag, feedthrough or delay are far more damped or lie beyond the band.
+pub(super) const LIGHT_DAMPING: f64 = 0.1;
+
+/// Whether a mode at `f_hz` with damping `zeta` is stable, lightly damped (below
+/// [`LIGHT_DAMPING`]) and inside `band_hz`.
+pub(super) fn light_in_band(f_hz: f64, zeta: f64, band_hz: (f64, f64)) -> bool {
+    zeta > 0.0 && zeta < LIGHT_DAMPING && f_hz >= band_hz.0 && f_hz <= band_hz.1
+}
+
+/// The lightly damped in-band modes ([`light_in_band`]) of `after` that `before` lacks
+/// ([`new_modes`]: none of its modes within 3 %), as `(f_hz, zeta)`.
+pub(super) fn lacked_light_modes(
+    before: &AdditiveModel,
+    after: &AdditiveModel,
+    band_hz: (f64, f64),
+) -> Vec<(f64, f64)> {
+    new_modes(before, after)
+        .into_iter()
+        .filter(|&(f, z)| light_in_band(f, z, band_hz))
+        .collect()
+}
 
 /// Missed modes from the common-denominator (Sanathanan-Koerner) start `sk`: its lightly
 /// damped poles in the band that the current model lacks (none of its modes within 3 %,
@@ -318,11 +339,7 @@ pub fn common_denominator_modes(
     sk: &AdditiveModel,
 ) -> Option<Trial> {
     let fd = &ctx.fit_data;
-    let (lo, hi) = fd.band_hz;
-    let new: Vec<(f64, f64)> = new_modes(current.model, sk)
-        .into_iter()
-        .filter(|&(f, z)| z > 0.0 && z < SK_LIGHT_DAMPING && f >= lo && f <= hi)
-        .collect();
+    let new = lacked_light_modes(current.model, sk, fd.band_hz);
     if new.is_empty() {
         return None;
     }
@@ -448,25 +465,23 @@ pub fn refit_candidate(
         max_iterations: cap.map_or(riv.max_iterations, |c| c.min(riv.max_iterations)),
         ..riv.clone()
     };
+    let mut r = refit(aug, fd, &riv_capped).ok()?;
+    let mut evidence = evidence;
+    if let Some((without, note)) = without_redundant_modes(&r.model, current.model, fd, &riv_capped)
+    {
+        r = Refitted {
+            iterations: r.iterations + without.iterations,
+            ..without
+        };
+        evidence = format!("{evidence}; {note}");
+    }
     let Refitted {
         model: m,
         cost: c,
         iterations,
         capped,
         remaining,
-    } = refit(aug, fd, &riv_capped).ok()?;
-    let (iterations, capped, remaining, m, c, evidence) =
-        match without_redundant_modes(&m, current.model, fd, &riv_capped) {
-            Some((r, note)) => (
-                iterations + r.iterations,
-                r.capped,
-                r.remaining,
-                r.model,
-                r.cost,
-                format!("{evidence}; {note}"),
-            ),
-            None => (iterations, capped, remaining, m, c, evidence),
-        };
+    } = r;
     let screened = (cap.is_some() && capped).then(|| Screened {
         candidate: candidate.clone(),
         evidence: evidence.clone(),

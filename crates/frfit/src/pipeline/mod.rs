@@ -327,6 +327,7 @@ pub fn run(
         fit,
         summary: restart,
         delay: delay_restart,
+        sk_start,
     } = if cfg.diagnose && cfg.start_model.is_none() {
         let t = Instant::now();
         let r = better_first_fit(&ctx, cfg, fit, speculative, fitter_report.cmif_peaks.len())?;
@@ -337,6 +338,7 @@ pub fn run(
             fit,
             summary: None,
             delay: None,
+            sk_start: None,
         }
     };
     let t = Instant::now();
@@ -351,7 +353,7 @@ pub fn run(
         stages,
     } = if cfg.diagnose {
         let t = Instant::now();
-        let d = diagnose(&ctx, cfg, fit, &initial_response, delay_restart)?;
+        let d = diagnose(&ctx, cfg, fit, &initial_response, delay_restart, sk_start)?;
         timings.stage("diagnose", t);
         d
     } else {
