@@ -7,7 +7,34 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::qr::no_pivoting::factor::{
     qr_in_place, qr_in_place_scratch, recommended_block_size,
 };
-use faer::{Mat, MatMut, Par};
+use faer::{Mat, MatMut, MatRef, Par};
+use rayon::prelude::*;
+
+/// The `R` factor (`cols x cols`, upper triangular, rows of either sign) of a tall
+/// matrix by a two-level (tall-skinny) QR on the rayon pool: the QR of each of a few
+/// blocks of rows in parallel, then the QR of their stacked `R` factors. The same
+/// `R^T R` as one QR of the whole matrix (the Householder QR of a stack of orthogonal
+/// transformations), at one block's cost per thread. One QR when the matrix is not
+/// tall enough for two blocks of at least twice as many rows as columns.
+pub(crate) fn tall_r(a: MatRef<'_, f64>) -> Mat<f64> {
+    let (rows, cols) = (a.nrows(), a.ncols());
+    let blocks = rayon::current_num_threads().min(rows / (2 * cols).max(1));
+    if blocks < 2 {
+        return a.qr().thin_R().to_owned();
+    }
+    let bounds: Vec<(usize, usize)> = (0..blocks)
+        .map(|b| (b * rows / blocks, (b + 1) * rows / blocks))
+        .collect();
+    let parts: Vec<Mat<f64>> = bounds
+        .par_iter()
+        .map(|&(r0, r1)| a.subrows(r0, r1 - r0).qr().thin_R().to_owned())
+        .collect();
+    let mut stacked = Mat::<f64>::zeros(blocks * cols, cols);
+    for (b, part) in parts.iter().enumerate() {
+        stacked.subrows_mut(b * cols, cols).copy_from(part);
+    }
+    stacked.qr().thin_R().to_owned()
+}
 
 /// Householder QR of the column-major `rows x cols` matrix `a` in place: on return the
 /// upper triangle of its first `min(rows, cols)` rows holds `R` (the reflectors are
@@ -92,6 +119,34 @@ pub(crate) fn back_substitute(a: &[f64], rows: usize, off: usize, n: usize, b: &
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tall_r_reproduces_the_gram_matrix_of_one_qr() {
+        // tall enough for two blocks on a pool of two threads, and a matrix too short
+        for rows in [400usize, 37] {
+            let cols = 9;
+            let a = Mat::<f64>::from_fn(rows, cols, |i, j| {
+                ((i * 7 + j * 13) % 17) as f64 - 8.0 + 0.1 * (i as f64).sin() * j as f64
+            });
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .unwrap();
+            let r = pool.install(|| tall_r(a.as_ref()));
+            assert_eq!((r.nrows(), r.ncols()), (cols, cols));
+            let g = r.transpose() * &r;
+            let g0 = a.transpose() * &a;
+            let scale = g0.norm_l2();
+            for i in 0..cols {
+                for j in 0..cols {
+                    assert!((g[(i, j)] - g0[(i, j)]).abs() <= 1e-12 * scale, "{i} {j}");
+                    if i > j {
+                        assert_eq!(r[(i, j)], 0.0);
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn r_reproduces_the_gram_matrix() {

@@ -21,9 +21,14 @@
 //! with `K = sum_e s_e c_e c_e^T`,
 //!
 //! and `sum_e J_e^T r_e [i] = sum_{a in S_i} sum_e s_e c_e[iota(a)] (D^T r_e)[a]` (the
-//! residual `r_e` is orthogonal to the columns of `A`). `D^T P^perp D` is the Gram
-//! matrix of the lower-right block of the `R` factor of `[A | D]`: one QR per group and
-//! Jacobian, of `2N x (n_lin + n_D)`, instead of one per entry. The information
+//! residual `r_e` is orthogonal to the columns of `A`) `= sum_{a in S_i} D[:, a]^T
+//! W[:, iota(a)]` with `W = R S C^T` (`R`: the residuals as columns, `S`: the scales,
+//! `C`: the coefficients as columns): one product of the residuals with the `n_lin`
+//! columns of `S C^T` rather than with the `n_D` (about twice as many) derivative
+//! columns, on the residuals the evaluation at the same point kept. `D^T P^perp D` is
+//! the Gram matrix of the lower-right block of the `R` factor of `[A | D]`: one QR per
+//! group and Jacobian, of `2N x (n_lin + n_D)`, instead of one per entry (a two-level
+//! QR of blocks of lines on the rayon pool, [`crate::qr::tall_r`]). The information
 //! matrix is then factorised by a Cholesky decomposition (column-scaled to unit
 //! diagonal); that squares its condition number, which the iteration tolerates (the
 //! right-hand side, the gradient, is computed from the explicit residual and keeps its
@@ -194,6 +199,7 @@ impl Problem {
         let (m, n_lin) = (self.lay.m(), self.lay.n_lin());
         let mut coef = vec![0.0; m * n_lin];
         let mut entry_cost = vec![0.0; m];
+        let mut residuals = Vec::with_capacity(sh.groups.len());
         for grp in &sh.groups {
             let mut a = self.shared_basis(&lines, &grp.sw);
             // column scaling, then the QR; a (scaled) pivot below 1e-11 is a column in the
@@ -226,7 +232,10 @@ impl Problem {
                 }
             }
             let q1 = qr.compute_thin_Q();
-            let chunks: Vec<(usize, Vec<f64>, Vec<f64>)> = (0..grp.entries.len())
+            // the residual of each chunk of entries, kept for the Jacobian at this point
+            // per chunk: its first entry, coefficients, costs and residual
+            type Chunk = (usize, Vec<f64>, Vec<f64>, Mat<f64>);
+            let chunks: Vec<Chunk> = (0..grp.entries.len())
                 .step_by(CHUNK)
                 .collect::<Vec<_>>()
                 .into_par_iter()
@@ -257,17 +266,20 @@ impl Problem {
                         }
                         costs[c] = 0.5 * grp.scale[c0 + c] * res.col(c).squared_norm_l2();
                     }
-                    (c0, cs, costs)
+                    (c0, cs, costs, res)
                 })
                 .collect();
-            for (c0, cs, costs) in chunks {
+            let mut res = Vec::with_capacity(chunks.len());
+            for (c0, cs, costs, r) in chunks {
                 for (c, cost) in costs.into_iter().enumerate() {
                     let e = grp.entries[c0 + c];
                     entry_cost[e] = cost;
                     coef[e * n_lin..(e + 1) * n_lin]
                         .copy_from_slice(&cs[c * n_lin..(c + 1) * n_lin]);
                 }
+                res.push(r);
             }
+            residuals.push(res);
         }
         if coef.iter().any(|x| !x.is_finite()) {
             return Err(Singular {
@@ -281,6 +293,7 @@ impl Problem {
             coef,
             entry_cost,
             gram: vec![None; m],
+            residual: Some(std::sync::Arc::new(residuals)),
         })
     }
 
@@ -306,14 +319,14 @@ impl Problem {
         let mut jtr = vec![0.0; n_nl];
         let mut vn2 = vec![0.0; n_nl];
         let mut rtr = 0.0;
-        for grp in &sh.groups {
+        for (gi, grp) in sh.groups.iter().enumerate() {
             let a = self.shared_basis(&lines, &grp.sw);
             let d = self.fill_derivatives(&lines, &grp.sw, nd);
             // R of [A | D]: its lower-right block is the R factor of P^perp D
             let mut ad = Mat::<f64>::zeros(rows, n_lin + nd);
             ad.subcols_mut(0, n_lin).copy_from(&a);
             ad.subcols_mut(n_lin, nd).copy_from(&d);
-            let rf = ad.qr().thin_R().to_owned();
+            let rf = crate::qr::tall_r(ad.as_ref());
             let r12 = rf.submatrix(0, n_lin, n_lin, nd);
             let r22 = rf.submatrix(n_lin, n_lin, nd, nd);
             let mut mproj = Mat::<f64>::zeros(nd, nd);
@@ -327,69 +340,80 @@ impl Problem {
             );
             let mut gd = mproj.clone();
             matmul(gd.as_mut(), Accum::Add, r12.transpose(), r12, 1.0, Par::Seq);
-            // the residuals, D^T r_e and K, in chunks of entries
+            // the coefficients C (`n_lin x entries`) and C S (`S`: the entries' scales)
+            let ne = grp.entries.len();
             let coef_of = |c: usize| {
                 let e = grp.entries[c];
                 &ev.coef[e * n_lin..(e + 1) * n_lin]
             };
-            type Part = (Vec<f64>, Mat<f64>, f64);
-            let parts: Vec<Part> = (0..grp.entries.len())
-                .step_by(CHUNK)
-                .collect::<Vec<_>>()
+            let cm = Mat::from_fn(n_lin, ne, |l, c| coef_of(c)[l]);
+            let sct = Mat::from_fn(ne, n_lin, |c, l| cm[(l, c)] * grp.scale[c]);
+            // `sum_e s_e c_e[l] (D^T r_e)[a] = D[:, a]^T W[:, l]` with `W = R S C^T`: one
+            // product of the residual with `n_lin` columns (not with the `n_D`
+            // derivative columns), by chunks of entries on the rayon pool; the residual
+            // is the evaluation's at the same point, or computed again
+            let stored = ev
+                .residual
+                .as_ref()
+                .and_then(|r| r.get(gi))
+                .filter(|r| r.iter().map(|c| c.ncols()).sum::<usize>() == ne);
+            // one accumulator per thread, over a contiguous run of chunks
+            let n_chunks = ne.div_ceil(CHUNK);
+            let runs = rayon::current_num_threads().clamp(1, n_chunks.max(1));
+            let w = (0..runs)
                 .into_par_iter()
-                .map(|c0| {
-                    let c1 = (c0 + CHUNK).min(grp.entries.len());
-                    let nc = c1 - c0;
-                    let cm = Mat::from_fn(n_lin, nc, |l, c| coef_of(c0 + c)[l]);
-                    let mut res = grp.y.subcols(c0, nc).to_owned();
-                    matmul(
-                        res.as_mut(),
-                        Accum::Add,
-                        a.as_ref(),
-                        cm.as_ref(),
-                        -1.0,
-                        Par::Seq,
-                    );
-                    let mut t = Mat::<f64>::zeros(nd, nc);
-                    matmul(
-                        t.as_mut(),
-                        Accum::Replace,
-                        d.transpose(),
-                        res.as_ref(),
-                        1.0,
-                        Par::Seq,
-                    );
-                    let mut g = vec![0.0; n_nl];
-                    let mut rr = 0.0;
-                    for c in 0..nc {
-                        let s = grp.scale[c0 + c];
-                        let x = coef_of(c0 + c);
-                        for (aa, dc) in cols.iter().enumerate() {
-                            g[dc.param] += s * x[dc.coef] * t[(aa, c)];
-                        }
-                        rr += s * res.col(c).squared_norm_l2();
+                .map(|t| {
+                    let mut w = Mat::<f64>::zeros(rows, n_lin);
+                    for ci in t * n_chunks / runs..(t + 1) * n_chunks / runs {
+                        let c0 = ci * CHUNK;
+                        let nc = CHUNK.min(ne - c0);
+                        let computed;
+                        let r = match stored {
+                            Some(s) if s[ci].ncols() == nc => s[ci].as_ref(),
+                            _ => {
+                                let mut r = grp.y.subcols(c0, nc).to_owned();
+                                matmul(
+                                    r.as_mut(),
+                                    Accum::Add,
+                                    a.as_ref(),
+                                    cm.subcols(c0, nc),
+                                    -1.0,
+                                    Par::Seq,
+                                );
+                                computed = r;
+                                computed.as_ref()
+                            }
+                        };
+                        matmul(
+                            w.as_mut(),
+                            Accum::Add,
+                            r,
+                            sct.subrows(c0, nc),
+                            1.0,
+                            Par::Seq,
+                        );
                     }
-                    let sc = Mat::from_fn(n_lin, nc, |l, c| cm[(l, c)] * grp.scale[c0 + c]);
-                    let mut k = Mat::<f64>::zeros(n_lin, n_lin);
-                    matmul(
-                        k.as_mut(),
-                        Accum::Replace,
-                        sc.as_ref(),
-                        cm.transpose(),
-                        1.0,
-                        Par::Seq,
-                    );
-                    (g, k, rr)
+                    w
                 })
-                .collect();
-            let mut k = Mat::<f64>::zeros(n_lin, n_lin);
-            for (g, kp, rr) in parts {
-                for (acc, v) in jtr.iter_mut().zip(g) {
-                    *acc += v;
-                }
-                k += kp;
-                rtr += rr;
+                .reduce(|| Mat::<f64>::zeros(rows, n_lin), |a, b| a + b);
+            for (aa, dc) in cols.iter().enumerate() {
+                jtr[dc.param] += d.col(aa).transpose() * w.col(dc.coef);
             }
+            let mut k = Mat::<f64>::zeros(n_lin, n_lin);
+            matmul(
+                k.as_mut(),
+                Accum::Replace,
+                cm.as_ref(),
+                sct.as_ref(),
+                1.0,
+                Par::Seq,
+            );
+            // `s_e ||r_e||^2` is twice the entry's cost
+            rtr += grp
+                .entries
+                .iter()
+                .map(|&e| 2.0 * ev.entry_cost[e])
+                .sum::<f64>();
             for (aa, ca) in cols.iter().enumerate() {
                 for (bb, cb) in cols.iter().enumerate() {
                     let kk = k[(ca.coef, cb.coef)];

@@ -169,6 +169,11 @@ pub(crate) struct Eval {
     /// Per entry, the Gram matrix of `[A_e | y_e]` when the evaluation went through it
     /// (the Jacobian at the same point reuses it).
     pub gram: Vec<Option<Vec<f64>>>,
+    /// On shared weights ([`crate::shared`]), the weighted residual of every group, by
+    /// chunks of its entries (`2N x chunk`, the group's entry order): the Jacobian at
+    /// the same point reuses it. Shared because the iteration keeps two evaluations
+    /// alive.
+    pub residual: Option<std::sync::Arc<Vec<Vec<faer::Mat<f64>>>>>,
 }
 
 /// A linear problem without a unique solution (a basis column of entry `entry` is in
@@ -460,6 +465,7 @@ impl Problem {
             coef,
             entry_cost,
             gram,
+            residual: None,
         })
     }
 

@@ -19,8 +19,9 @@
 use crate::prepare::Variable;
 use crate::realization::condition;
 use crate::SubspaceError;
+use faer::linalg::matmul::matmul;
 use faer::linalg::solvers::SolveLstsq;
-use faer::Mat;
+use faer::{Accum, Mat, Par};
 use rayon::prelude::*;
 use realize::{FrfModel, KnownFactors, ModalModel, PolePair, RealPole, C64};
 use serde::{Deserialize, Serialize};
@@ -395,6 +396,21 @@ pub fn fit_residues(
     ps: &PoleSet,
     factors: &KnownFactors,
 ) -> Result<(FrfModel, f64), SubspaceError> {
+    fit_residues_costed(ny, nu, omega, g, w, ps, factors).map(|(m, c, _)| (m, c))
+}
+
+/// [`fit_residues`] with the weighted cost of the fitted model against `g`,
+/// `sum w |g - P|^2 / (2 N)` (the normalisation of `frf_data::weighted_cost`), from the
+/// explicit least-squares residual: the model's response need not be computed again.
+pub fn fit_residues_costed(
+    ny: usize,
+    nu: usize,
+    omega: &[f64],
+    g: &[C64],
+    w: &[f64],
+    ps: &PoleSet,
+    factors: &KnownFactors,
+) -> Result<(FrfModel, f64, f64), SubspaceError> {
     let terms = terms_of(ps);
     let (nl, nb, m) = (omega.len(), terms.len(), ny * nu);
     if 2 * nl < nb {
@@ -428,7 +444,9 @@ pub fn fit_residues(
     // entries with proportional weights share their regressor: one QR per group, the
     // groups in parallel
     let groups = frf_data::proportional_groups(w, m, 1e-12);
-    let solved: Vec<Result<(Mat<f64>, f64), SubspaceError>> = groups
+    // per group: the coefficients, the condition number and the weighted residual
+    type Solved = Result<(Mat<f64>, f64, f64), SubspaceError>;
+    let solved: Vec<Solved> = groups
         .par_iter()
         .map(|grp| {
             let mut a = Mat::<f64>::zeros(2 * nl, nb);
@@ -449,10 +467,11 @@ pub fn fit_residues(
                 .entries
                 .len()
                 .div_ceil(rayon::current_num_threads().max(1));
-            let parts: Vec<Mat<f64>> = grp
+            let parts: Vec<(Mat<f64>, f64)> = grp
                 .entries
                 .par_chunks(chunk.max(RHS_CHUNK_MIN))
-                .map(|entries| {
+                .zip(grp.scales.par_chunks(chunk.max(RHS_CHUNK_MIN)))
+                .map(|(entries, scales)| {
                     let mut y = Mat::<f64>::zeros(2 * nl, entries.len());
                     for k in 0..nl {
                         let sw = grp.line_weights[k].sqrt();
@@ -461,26 +480,44 @@ pub fn fit_residues(
                             y[(2 * k + 1, c)] = g[k * m + e].im * sw;
                         }
                     }
-                    qr.solve_lstsq(&y)
+                    let x = qr.solve_lstsq(&y);
+                    // the residual, explicitly (no cancellation at an exact fit)
+                    matmul(
+                        y.as_mut(),
+                        Accum::Add,
+                        a.as_ref(),
+                        x.as_ref(),
+                        -1.0,
+                        Par::Seq,
+                    );
+                    // the entry's weights are its scale times the group's line weights
+                    let rr = (0..y.ncols())
+                        .map(|c| scales[c] * y.col(c).squared_norm_l2())
+                        .sum();
+                    (x, rr)
                 })
                 .collect();
             let mut x = Mat::<f64>::zeros(nb, grp.entries.len());
             let mut c0 = 0;
-            for part in &parts {
+            let mut rr = 0.0;
+            for (part, part_rr) in &parts {
                 for c in 0..part.ncols() {
                     for q in 0..nb {
                         x[(q, c0 + c)] = part[(q, c)] / scale[q];
                     }
                 }
                 c0 += part.ncols();
+                rr += part_rr;
             }
-            Ok((x, cond))
+            Ok((x, cond, rr))
         })
         .collect();
     let mut worst = 1.0f64;
+    let mut rr = 0.0;
     for (grp, res) in groups.iter().zip(solved) {
-        let (x, cond) = res?;
+        let (x, cond, grp_rr) = res?;
         worst = worst.max(cond);
+        rr += grp_rr;
         for (c, &e) in grp.entries.iter().enumerate() {
             let (i, j) = (e % ny, e / ny);
             let mut re_part = vec![0.0; ps.pairs.len()];
@@ -507,7 +544,7 @@ pub fn fit_residues(
         factors: factors.clone(),
     };
     model.validate()?;
-    Ok((model, worst))
+    Ok((model, worst, rr / (2.0 * nl.max(1) as f64)))
 }
 
 #[cfg(test)]
@@ -517,6 +554,48 @@ mod tests {
     fn pole(f_hz: f64, zeta: f64) -> C64 {
         let w = std::f64::consts::TAU * f_hz;
         C64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt())
+    }
+
+    /// The cost from the least-squares residual is the model's weighted cost against
+    /// the data, with entries of different weight scales (one proportional group) and
+    /// a second group of other line weights.
+    #[test]
+    fn the_residual_cost_is_the_weighted_cost_of_the_fitted_model() {
+        let (ny, nu, nl) = (2, 3, 40);
+        let m = ny * nu;
+        let omega: Vec<f64> = (0..nl).map(|k| 20.0 + 7.0 * k as f64).collect();
+        let ps = PoleSet {
+            pairs: vec![pole(30.0, 0.02), pole(41.0, 0.05)],
+            reals: vec![-90.0],
+            integrators: 1,
+            at_origin: 1,
+            ..PoleSet::default()
+        };
+        let g: Vec<C64> = (0..nl * m)
+            .map(|i| C64::new((i as f64 * 0.37).sin(), (i as f64 * 0.11).cos()))
+            .collect();
+        let w: Vec<f64> = (0..nl * m)
+            .map(|i| {
+                let (k, e) = (i / m, i % m);
+                let line = 1.0 + (k as f64 * 0.3).cos().abs();
+                if e < 4 {
+                    line * (1.0 + e as f64)
+                } else {
+                    1.0 + k as f64
+                }
+            })
+            .collect();
+        let factors = KnownFactors::default();
+        let (model, _, cost) = fit_residues_costed(ny, nu, &omega, &g, &w, &ps, &factors).unwrap();
+        let p = model.freq_response(&omega).unwrap();
+        let mut want = 0.0;
+        for k in 0..nl {
+            for e in 0..m {
+                want += w[k * m + e] * (g[k * m + e] - p.line(k)[e]).norm_sqr();
+            }
+        }
+        want /= 2.0 * nl as f64;
+        assert!((cost - want).abs() <= 1e-10 * want, "{cost} against {want}");
     }
 
     /// Lines from 10 Hz: a heavily damped pair at 10.9 Hz (a split double integrator)

@@ -1,7 +1,7 @@
 //! [`SubspaceInit`]: the frequency-domain subspace fit as an initialiser of the
 //! estimator chain (`--init subspace`).
 
-use crate::currency::{classify, eigen_weights, fit_residues, PoleSet, ReflectedPole};
+use crate::currency::{classify, eigen_weights, fit_residues_costed, PoleSet, ReflectedPole};
 use crate::delay_refine::{
     self, huber, line_residuals, DelayCost, DelayPass, DelayRefinement, RotatedCost,
 };
@@ -14,7 +14,6 @@ use crate::prepare::{prepare, Variable};
 use crate::projection::project;
 use crate::realization::{bilinear_to_continuous, fit_b_d, shift_a_c};
 use crate::SubspaceError;
-use frf_data::chain::weighted_cost;
 use frf_data::delay::{estimate_delay, DelayConfig, DelayEstimate};
 use frf_data::{
     Convergence, DelayChoice, Estimator, Fit, FrfDataset, Precomputed, ProgressSink, Weighting,
@@ -473,7 +472,7 @@ impl SubspaceInit {
             pair_members: m.pairs.iter().map(|p| vec![p.pole]).collect(),
         };
         let w = weighting.weights(data)?;
-        let (model, cond) = fit_residues(
+        let (model, cond, cost) = fit_residues_costed(
             ny,
             nu,
             &data.omegas(),
@@ -482,7 +481,6 @@ impl SubspaceInit {
             &ps,
             &id.model.factors,
         )?;
-        let cost = weighted_cost(&model, data, &weighting)?;
         id.messages.push(format!(
             "poles from the data with the inputs projected onto {k} of {nu} fixed directions ((17) on {} of {ny} output directions); the residues of all {} entries refitted with them: cost {:.4e} (compressed data {:.4e})",
             k.min(ny),
@@ -898,7 +896,7 @@ impl SubspaceInit {
                             &PoleRefineSettings::default(),
                         )
                         .map_or(ps.clone(), |r| r.poles);
-                        let (model, _) = fit_residues(
+                        let (_, _, cost) = fit_residues_costed(
                             ny,
                             nu,
                             &prepared.omega,
@@ -908,7 +906,6 @@ impl SubspaceInit {
                             &factors,
                         )
                         .ok()?;
-                        let cost = weighted_cost(&model, data, &weighting).ok()?;
                         Some((cost * 2.0 * nl as f64, currency_params(&ps, ny * nu)))
                     });
                     timings.push(("order F test".to_string(), t.elapsed().as_secs_f64()));
@@ -941,7 +938,6 @@ impl SubspaceInit {
                         (n0, n_max),
                         &factors,
                         data,
-                        &weighting,
                         sv_rule,
                         &mut messages,
                     )
@@ -996,9 +992,8 @@ impl SubspaceInit {
             ));
         }
         let g = data.values_vec();
-        let (mut model, mut cond_res) =
-            fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)?;
-        let mut cost = weighted_cost(&model, data, &weighting)?;
+        let (mut model, mut cond_res, mut cost) =
+            fit_residues_costed(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)?;
         let significance_tests = match cfg.order_rule {
             OrderRule::Auto | OrderRule::FTest => true,
             OrderRule::SingularValues => false,
@@ -1026,8 +1021,6 @@ impl SubspaceInit {
                 inverse_variance,
                 g: &g,
                 factors: &factors,
-                data,
-                weighting: &weighting,
             };
             let k0 = ps.integrators;
             // the poles the integrators are added to: those of the singular values
@@ -1036,9 +1029,15 @@ impl SubspaceInit {
             let mut base = ps.clone();
             for k in k0 + 1..=cfg.max_integrators {
                 let trial = base.with_integrators(k, prepared.omega[0]);
-                let (tm, tc) =
-                    fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &trial, &factors)?;
-                let t_cost = weighted_cost(&tm, data, &weighting)?;
+                let (tm, tc, t_cost) = fit_residues_costed(
+                    ny,
+                    nu,
+                    &prepared.omega,
+                    &g,
+                    &prepared.w,
+                    &trial,
+                    &factors,
+                )?;
                 // states below the band that the integrators replace (see
                 // `PoleSet::with_integrators`) count against the added parameters
                 let replaced = ps.pairs.len().saturating_sub(trial.pairs.len()) * 2
@@ -1157,15 +1156,8 @@ impl SubspaceInit {
             }
         }
         // the merged poles, decided with the final rigid-body part
-        let (m2, c2, cost2) = self.choose_merged(
-            &prepared,
-            &g,
-            &factors,
-            &mut ps,
-            data,
-            &weighting,
-            &mut messages,
-        )?;
+        let (m2, c2, cost2) =
+            self.choose_merged(&prepared, &g, &factors, &mut ps, &mut messages)?;
         if let Some(m2) = m2 {
             model = m2;
             cond_res = c2;
@@ -1385,7 +1377,8 @@ fn sv_proposal(
 
 /// The fixed inputs of the passes on the flexible part
 /// ([`SubspaceInit::flexible_pass`], [`SubspaceInit::flexible_passes`]).
-struct PassInputs<'a, D: ?Sized> {
+#[derive(Clone, Copy)]
+struct PassInputs<'a> {
     /// The prepared data (the delay divided out, weighted).
     prepared: &'a crate::prepare::Prepared,
     /// The block rows of the projection and the order cap.
@@ -1396,19 +1389,7 @@ struct PassInputs<'a, D: ?Sized> {
     g: &'a [C64],
     /// The known factors of the currency.
     factors: &'a KnownFactors,
-    /// The data set the costs are taken on.
-    data: &'a D,
-    /// The weighting of the costs.
-    weighting: &'a Weighting,
 }
-
-impl<D: ?Sized> Clone for PassInputs<'_, D> {
-    fn clone(&self) -> Self {
-        *self
-    }
-}
-
-impl<D: ?Sized> Copy for PassInputs<'_, D> {}
 
 /// The result of [`SubspaceInit::flexible_pass`].
 struct FlexiblePass {
@@ -1429,14 +1410,12 @@ impl SubspaceInit {
     /// Returns the new model, its condition number and cost when a candidate other than
     /// the weighted mean won.
     #[allow(clippy::too_many_arguments)]
-    fn choose_merged<D: FrfDataset + ?Sized>(
+    fn choose_merged(
         &self,
         prepared: &crate::prepare::Prepared,
         g: &[C64],
         factors: &KnownFactors,
         ps: &mut PoleSet,
-        data: &D,
-        weighting: &Weighting,
         messages: &mut Vec<String>,
     ) -> Result<(Option<FrfModel>, f64, f64), SubspaceError> {
         let (ny, nu) = (prepared.ny, prepared.nu);
@@ -1452,18 +1431,15 @@ impl SubspaceInit {
             let base_cost = match &best {
                 Some((_, _, c)) => *c,
                 None => {
-                    let (m, _) =
-                        fit_residues(ny, nu, &prepared.omega, g, &prepared.w, ps, factors)?;
-                    weighted_cost(&m, data, weighting)?
+                    fit_residues_costed(ny, nu, &prepared.omega, g, &prepared.w, ps, factors)?.2
                 }
             };
             let mut chosen: Option<(C64, FrfModel, f64, f64)> = None;
             for cand in members.iter().copied().chain(std::iter::once(plain)) {
                 let mut trial = ps.clone();
                 trial.pairs[q] = cand;
-                let (m, cond) =
-                    fit_residues(ny, nu, &prepared.omega, g, &prepared.w, &trial, factors)?;
-                let c = weighted_cost(&m, data, weighting)?;
+                let (m, cond, c) =
+                    fit_residues_costed(ny, nu, &prepared.omega, g, &prepared.w, &trial, factors)?;
                 let better = c < chosen.as_ref().map_or(base_cost, |x| x.3);
                 if better {
                     chosen = Some((cand, m, cond, c));
@@ -1537,7 +1513,6 @@ impl SubspaceInit {
         (n0, n_max): (usize, usize),
         factors: &KnownFactors,
         data: &D,
-        weighting: &Weighting,
         sv_rule: String,
         messages: &mut Vec<String>,
     ) -> (usize, String) {
@@ -1561,9 +1536,9 @@ impl SubspaceInit {
         let g = data.values_vec();
         let cost_at = |n: usize| -> Option<f64> {
             let ps = self.poles_at(prepared, proj, n)?;
-            let (model, _) =
-                fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, factors).ok()?;
-            weighted_cost(&model, data, weighting).ok()
+            fit_residues_costed(ny, nu, &prepared.omega, &g, &prepared.w, &ps, factors)
+                .ok()
+                .map(|(_, _, c)| c)
         };
         let Some(c0) = cost_at(n0) else {
             return (n0, sv_rule);
@@ -1605,9 +1580,9 @@ impl SubspaceInit {
     /// The subspace step repeated on the data with the rigid-body part of `model`
     /// subtracted: projection, order from the singular values, (12), (17), poles; the
     /// integrators of `ps` are kept and all residues refitted on the full data.
-    fn flexible_pass<D: FrfDataset + ?Sized>(
+    fn flexible_pass(
         &self,
-        inputs: &PassInputs<'_, D>,
+        inputs: &PassInputs<'_>,
         model: &FrfModel,
         ps: &PoleSet,
     ) -> Result<Option<FlexiblePass>, SubspaceError> {
@@ -1618,8 +1593,6 @@ impl SubspaceInit {
             inverse_variance,
             g,
             factors,
-            data,
-            weighting,
         } = *inputs;
         let ny = prepared.ny;
         let mut rigid = FrfModel {
@@ -1650,7 +1623,7 @@ impl SubspaceInit {
             return Ok(None);
         };
         poles.integrators = poles.integrators.max(ps.integrators);
-        let (mut model, mut cond) = fit_residues(
+        let (mut model, mut cond, mut cost) = fit_residues_costed(
             model.ny(),
             model.nu(),
             &prepared.omega,
@@ -1659,11 +1632,8 @@ impl SubspaceInit {
             &poles,
             factors,
         )?;
-        let mut cost = weighted_cost(&model, data, weighting)?;
         let mut notes = Vec::new();
-        let (m2, c2, cost2) = self.choose_merged(
-            prepared, g, factors, &mut poles, data, weighting, &mut notes,
-        )?;
+        let (m2, c2, cost2) = self.choose_merged(prepared, g, factors, &mut poles, &mut notes)?;
         if let Some(m2) = m2 {
             model = m2;
             cond = c2;
@@ -1685,9 +1655,9 @@ impl SubspaceInit {
     /// cost: at most [`FLEXIBLE_PASSES`], ending after a pass that lowers it by less
     /// than 1 %. `seen(i, cost before, pass, kept)` is told of every pass made (`i`
     /// from 0). Returns the last pass kept, `None` when none lowered the cost.
-    fn flexible_passes<D: FrfDataset + ?Sized>(
+    fn flexible_passes(
         &self,
-        inputs: &PassInputs<'_, D>,
+        inputs: &PassInputs<'_>,
         start: (&FrfModel, &PoleSet, f64),
         mut seen: impl FnMut(usize, f64, &FlexiblePass, bool),
     ) -> Result<Option<FlexiblePass>, SubspaceError> {
