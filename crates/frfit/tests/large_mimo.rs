@@ -439,28 +439,44 @@ fn delayed_4_by_4(scale: f64) -> (frfit::chain::ChainResult, f64) {
 }
 
 /// With complex residues and a feedthrough, a delay change is taken up to first order
-/// by the residues and the feedthrough of a strictly proper plant: near exact data the
-/// delay's information vanishes (condition 8.9e16), and the ML step used to end with an
-/// error. It now holds the delay where it is (within 0.3 us of the truth here) and
-/// says so.
+/// by the residues and the feedthrough of a strictly proper plant: near exact data (a
+/// thousandth of the simulator's noise) the delay's information is of second order,
+/// and the ML step used to end with an error. Two outcomes are right, and which one
+/// comes depends on the last digits of the information matrix:
+///
+/// - at the optimum (cost 1.58074e4, 13.19 us) its condition is 1.5e12, below the
+///   limit (1e13): the delay is fitted and reported with the width of its profile
+///   (0.42 us; the truth 0.49 us away);
+/// - where the iterations stopped short of it (6 cost units above, before the
+///   Jacobian's gradient took the residuals the evaluation keeps) the condition was
+///   8.9e16: the delay is held where it is (13.69 us) and the messages say so.
 #[test]
-fn a_delay_the_residues_take_up_is_held_near_exact_data() {
+fn a_delay_the_residues_take_up_near_exact_data_is_held_or_reported_with_its_profile() {
     let (out, tau) = delayed_4_by_4(1e-3);
     let ml = out.links.last().unwrap();
     let msgs = ml.messages.join("\n");
     let f = &out.model.model.factors;
     println!("delay {:.3} us\n{msgs}", f.delay_s * 1e6);
-    assert!(
-        msgs.contains("the delay is not determined by the data"),
-        "{msgs}"
-    );
-    assert!(!f.delay_fitted, "{msgs}");
-    assert!(
-        (f.delay_s - tau).abs() < 0.3e-6,
-        "{:.3} us",
-        f.delay_s * 1e6
-    );
     assert!(ml.convergence.is_converged(), "{msgs}");
+    if msgs.contains("the delay is not determined by the data") {
+        assert!(!f.delay_fitted, "{msgs}");
+        assert!(
+            (f.delay_s - tau).abs() < 0.3e-6,
+            "{:.3} us",
+            f.delay_s * 1e6
+        );
+    } else {
+        assert!(f.delay_fitted, "{msgs}");
+        let std = ml.details["delay_s_std"].as_f64().unwrap();
+        assert!(msgs.contains("the delay's profile is flatter"), "{msgs}");
+        assert!(std < 1e-6, "std {:.3} us", std * 1e6);
+        assert!(
+            (f.delay_s - tau).abs() < 2.5 * std,
+            "{:.3} us from the truth, std {:.3} us",
+            (f.delay_s - tau) * 1e6,
+            std * 1e6
+        );
+    }
 }
 
 /// At the simulator's noise level (1e-3) the delay of the same plant is determined,

@@ -6,6 +6,15 @@ use crate::{RealizeError, ResponseGrid, C64};
 use faer::Mat;
 use serde::{Deserialize, Serialize};
 
+/// Entries (`ny nu`) from which [`ModalModel::freq_response`] evaluates by matrix
+/// products ([`ModalModel::fill_by_products`]); smaller models keep the line loop.
+const PRODUCT_MIN_ENTRIES: usize = 100;
+/// Terms (feedthrough, integrators, two per pair, one per real pole) from which the
+/// products pay.
+const PRODUCT_MIN_TERMS: usize = 8;
+/// Lines per block (and per task on the rayon pool) of the products.
+const PRODUCT_BLOCK_LINES: usize = 64;
+
 /// One complex-conjugate pole pair `p, conj(p)` (with `Im p > 0`) and its residue `R`:
 /// the pair contributes `R / (s - p) + conj(R) / (s - conj(p))`.
 #[derive(Debug, Clone, PartialEq)]
@@ -222,6 +231,103 @@ impl ModalModel {
         }
     }
 
+    /// [`ModalModel::freq_response`] of a large model as matrix products: every term
+    /// is a real coefficient per entry times a complex function of `s` common to all
+    /// entries (the feedthrough 1, the rigid body `s^-k`, a pair's `f1 + f2` and
+    /// `j (f1 - f2)` with `f1 = 1/(s - p)`, `f2 = 1/(s - conj p)`, a real pole's
+    /// `1/(s - p)`), so a block of lines is `X^T B` with `X` the coefficients (terms x
+    /// entries) and `B` the functions (terms x lines), real and imaginary parts apart.
+    /// The coefficients are read once per block instead of once per line: the line
+    /// loop of [`ModalModel::eval_s_into`] streams every residue matrix for every line.
+    fn fill_by_products(&self, omega: &[f64], g: &mut ResponseGrid) {
+        use faer::linalg::matmul::matmul;
+        use faer::{Accum, Par};
+        use rayon::prelude::*;
+        let (ny, nu) = (self.ny, self.nu);
+        let m = ny * nu;
+        let nt = 1 + self.rigid.len() + 2 * self.pairs.len() + self.real_poles.len();
+        // X^T: entries x terms, in the order of the functions below
+        let xt = Mat::<f64>::from_fn(m, nt, |e, t| {
+            let (i, j) = (e % ny, e / ny);
+            let mut t = t;
+            if t == 0 {
+                return self.feedthrough[(i, j)];
+            }
+            t -= 1;
+            if t < self.rigid.len() {
+                return self.rigid[t][(i, j)];
+            }
+            t -= self.rigid.len();
+            if t < 2 * self.pairs.len() {
+                let r = self.pairs[t / 2].residue[(i, j)];
+                return if t % 2 == 0 { r.re } else { r.im };
+            }
+            t -= 2 * self.pairs.len();
+            self.real_poles[t].residue[(i, j)]
+        });
+        g.values
+            .par_chunks_mut(PRODUCT_BLOCK_LINES * m)
+            .enumerate()
+            .for_each(|(b, block)| {
+                let k0 = b * PRODUCT_BLOCK_LINES;
+                let nb = block.len() / m;
+                let mut bre = Mat::<f64>::zeros(nt, nb);
+                let mut bim = Mat::<f64>::zeros(nt, nb);
+                for c in 0..nb {
+                    let s = C64::new(0.0, omega[k0 + c]);
+                    let mut put = |t: usize, v: C64| {
+                        bre[(t, c)] = v.re;
+                        bim[(t, c)] = v.im;
+                    };
+                    put(0, C64::new(1.0, 0.0));
+                    let mut t = 1;
+                    if !self.rigid.is_empty() {
+                        let inv_s = s.inv();
+                        let mut pw = inv_s;
+                        for _ in &self.rigid {
+                            put(t, pw);
+                            pw *= inv_s;
+                            t += 1;
+                        }
+                    }
+                    for p in &self.pairs {
+                        let f1 = (s - p.pole).inv();
+                        let f2 = (s - p.pole.conj()).inv();
+                        put(t, f1 + f2);
+                        put(t + 1, C64::new(0.0, 1.0) * (f1 - f2));
+                        t += 2;
+                    }
+                    for p in &self.real_poles {
+                        put(t, (s - p.pole).inv());
+                        t += 1;
+                    }
+                }
+                let mut pre = Mat::<f64>::zeros(m, nb);
+                let mut pim = Mat::<f64>::zeros(m, nb);
+                matmul(
+                    pre.as_mut(),
+                    Accum::Replace,
+                    xt.as_ref(),
+                    bre.as_ref(),
+                    1.0,
+                    Par::Seq,
+                );
+                matmul(
+                    pim.as_mut(),
+                    Accum::Replace,
+                    xt.as_ref(),
+                    bim.as_ref(),
+                    1.0,
+                    Par::Seq,
+                );
+                for (c, line) in block.chunks_mut(m).enumerate() {
+                    for (e, v) in line.iter_mut().enumerate() {
+                        *v = C64::new(pre[(e, c)], pim[(e, c)]);
+                    }
+                }
+            });
+    }
+
     /// The continuous-time frequency response `P(j w)` at the angular frequencies
     /// `omega` (rad/s). Fails at `w = 0` when the model has integrators, and when the
     /// model does not pass [`ModalModel::validate`].
@@ -237,6 +343,10 @@ impl ModalModel {
         }
         let mut g = ResponseGrid::zeros(omega.len(), self.ny, self.nu);
         let terms = self.pairs.len() * 2 + self.real_poles.len() + self.rigid.len() + 1;
+        if self.ny * self.nu >= PRODUCT_MIN_ENTRIES && terms >= PRODUCT_MIN_TERMS {
+            self.fill_by_products(omega, &mut g);
+            return Ok(g);
+        }
         g.fill_lines(8 * terms * self.ny * self.nu, |k, line| {
             self.eval_s_into(C64::new(0.0, omega[k]), line)
         });
@@ -389,6 +499,40 @@ fn all_finite_complex(m: &Mat<C64>) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The products of a large model give the line loop's response to rounding.
+    #[test]
+    fn the_response_by_products_is_the_line_loop_response() {
+        let (ny, nu) = (10, 12);
+        let mut m = ModalModel::new(ny, nu);
+        let val = |a: usize, i: usize, j: usize| ((a * 31 + i * 7 + j * 3) as f64 * 0.173).sin();
+        for q in 0..6 {
+            let wn = 30.0 + 25.0 * q as f64;
+            m.pairs.push(PolePair {
+                pole: C64::new(-0.01 * wn, wn),
+                residue: Mat::from_fn(ny, nu, |i, j| C64::new(val(q, i, j), val(q + 9, i, j))),
+            });
+        }
+        m.real_poles.push(RealPole {
+            pole: -40.0,
+            residue: Mat::from_fn(ny, nu, |i, j| val(20, i, j)),
+        });
+        m.rigid = (0..2)
+            .map(|k| Mat::from_fn(ny, nu, |i, j| 1e3 * val(30 + k, i, j)))
+            .collect();
+        m.feedthrough = Mat::from_fn(ny, nu, |i, j| val(40, i, j));
+        assert!(ny * nu >= PRODUCT_MIN_ENTRIES);
+        let omega: Vec<f64> = (0..150).map(|k| 5.0 + 1.7 * k as f64).collect();
+        let g = m.freq_response(&omega).unwrap();
+        let mut line = vec![C64::new(0.0, 0.0); ny * nu];
+        for (k, &w) in omega.iter().enumerate() {
+            m.eval_s_into(C64::new(0.0, w), &mut line);
+            let scale = line.iter().map(|v| v.norm()).fold(0.0, f64::max);
+            for (a, b) in g.line(k).iter().zip(&line) {
+                assert!((a - b).norm() <= 1e-13 * scale, "line {k}: {a} against {b}");
+            }
+        }
+    }
 
     #[test]
     fn eulerian_rows() {
