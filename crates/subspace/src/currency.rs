@@ -385,24 +385,12 @@ const RHS_CHUNK_MIN: usize = 32;
 
 /// Fits the residues, rigid-body coefficients and feedthrough of the poles `ps` to the
 /// data `g` (line after line, each `vec(G)`) at `omega` with weights `w` (same layout),
-/// through the currency's response with `factors`. Returns the model and the worst
-/// condition number of the (column-scaled) regressors.
+/// through the currency's response with `factors`. Returns the model, the worst
+/// condition number of the (column-scaled) regressors, and the weighted cost of the
+/// model against `g`, `sum w |g - P|^2 / (2 N)` (the normalisation of
+/// `frf_data::weighted_cost`), from the explicit least-squares residual: the model's
+/// response need not be computed again.
 pub fn fit_residues(
-    ny: usize,
-    nu: usize,
-    omega: &[f64],
-    g: &[C64],
-    w: &[f64],
-    ps: &PoleSet,
-    factors: &KnownFactors,
-) -> Result<(FrfModel, f64), SubspaceError> {
-    fit_residues_costed(ny, nu, omega, g, w, ps, factors).map(|(m, c, _)| (m, c))
-}
-
-/// [`fit_residues`] with the weighted cost of the fitted model against `g`,
-/// `sum w |g - P|^2 / (2 N)` (the normalisation of `frf_data::weighted_cost`), from the
-/// explicit least-squares residual: the model's response need not be computed again.
-pub fn fit_residues_costed(
     ny: usize,
     nu: usize,
     omega: &[f64],
@@ -586,7 +574,7 @@ mod tests {
             })
             .collect();
         let factors = KnownFactors::default();
-        let (model, _, cost) = fit_residues_costed(ny, nu, &omega, &g, &w, &ps, &factors).unwrap();
+        let (model, _, cost) = fit_residues(ny, nu, &omega, &g, &w, &ps, &factors).unwrap();
         let p = model.freq_response(&omega).unwrap();
         let mut want = 0.0;
         for k in 0..nl {

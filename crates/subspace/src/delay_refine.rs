@@ -70,7 +70,7 @@ impl DelayCost<'_> {
     pub fn at(&self, tau: f64) -> Result<DelayPoint, SubspaceError> {
         let mut factors = self.factors.clone();
         factors.delay_s = tau;
-        let (model, cond) = fit_residues(
+        let (model, cond, _) = fit_residues(
             self.ny, self.nu, self.omega, self.g, self.w, self.poles, &factors,
         )?;
         let p = model.freq_response(self.omega)?;

@@ -1,7 +1,7 @@
 //! [`SubspaceInit`]: the frequency-domain subspace fit as an initialiser of the
 //! estimator chain (`--init subspace`).
 
-use crate::currency::{classify, eigen_weights, fit_residues_costed, PoleSet, ReflectedPole};
+use crate::currency::{classify, eigen_weights, fit_residues, PoleSet, ReflectedPole};
 use crate::delay_refine::{
     self, huber, line_residuals, DelayCost, DelayPass, DelayRefinement, RotatedCost,
 };
@@ -472,7 +472,7 @@ impl SubspaceInit {
             pair_members: m.pairs.iter().map(|p| vec![p.pole]).collect(),
         };
         let w = weighting.weights(data)?;
-        let (model, cond, cost) = fit_residues_costed(
+        let (model, cond, cost) = fit_residues(
             ny,
             nu,
             &data.omegas(),
@@ -896,7 +896,7 @@ impl SubspaceInit {
                             &PoleRefineSettings::default(),
                         )
                         .map_or(ps.clone(), |r| r.poles);
-                        let (_, _, cost) = fit_residues_costed(
+                        let (_, _, cost) = fit_residues(
                             ny,
                             nu,
                             &prepared.omega,
@@ -993,7 +993,7 @@ impl SubspaceInit {
         }
         let g = data.values_vec();
         let (mut model, mut cond_res, mut cost) =
-            fit_residues_costed(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)?;
+            fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, &factors)?;
         let significance_tests = match cfg.order_rule {
             OrderRule::Auto | OrderRule::FTest => true,
             OrderRule::SingularValues => false,
@@ -1029,15 +1029,8 @@ impl SubspaceInit {
             let mut base = ps.clone();
             for k in k0 + 1..=cfg.max_integrators {
                 let trial = base.with_integrators(k, prepared.omega[0]);
-                let (tm, tc, t_cost) = fit_residues_costed(
-                    ny,
-                    nu,
-                    &prepared.omega,
-                    &g,
-                    &prepared.w,
-                    &trial,
-                    &factors,
-                )?;
+                let (tm, tc, t_cost) =
+                    fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &trial, &factors)?;
                 // states below the band that the integrators replace (see
                 // `PoleSet::with_integrators`) count against the added parameters
                 let replaced = ps.pairs.len().saturating_sub(trial.pairs.len()) * 2
@@ -1430,16 +1423,14 @@ impl SubspaceInit {
             let current = ps.pairs[q];
             let base_cost = match &best {
                 Some((_, _, c)) => *c,
-                None => {
-                    fit_residues_costed(ny, nu, &prepared.omega, g, &prepared.w, ps, factors)?.2
-                }
+                None => fit_residues(ny, nu, &prepared.omega, g, &prepared.w, ps, factors)?.2,
             };
             let mut chosen: Option<(C64, FrfModel, f64, f64)> = None;
             for cand in members.iter().copied().chain(std::iter::once(plain)) {
                 let mut trial = ps.clone();
                 trial.pairs[q] = cand;
                 let (m, cond, c) =
-                    fit_residues_costed(ny, nu, &prepared.omega, g, &prepared.w, &trial, factors)?;
+                    fit_residues(ny, nu, &prepared.omega, g, &prepared.w, &trial, factors)?;
                 let better = c < chosen.as_ref().map_or(base_cost, |x| x.3);
                 if better {
                     chosen = Some((cand, m, cond, c));
@@ -1536,7 +1527,7 @@ impl SubspaceInit {
         let g = data.values_vec();
         let cost_at = |n: usize| -> Option<f64> {
             let ps = self.poles_at(prepared, proj, n)?;
-            fit_residues_costed(ny, nu, &prepared.omega, &g, &prepared.w, &ps, factors)
+            fit_residues(ny, nu, &prepared.omega, &g, &prepared.w, &ps, factors)
                 .ok()
                 .map(|(_, _, c)| c)
         };
@@ -1623,7 +1614,7 @@ impl SubspaceInit {
             return Ok(None);
         };
         poles.integrators = poles.integrators.max(ps.integrators);
-        let (mut model, mut cond, mut cost) = fit_residues_costed(
+        let (mut model, mut cond, mut cost) = fit_residues(
             model.ny(),
             model.nu(),
             &prepared.omega,
