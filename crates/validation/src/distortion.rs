@@ -725,11 +725,15 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
         /// The floor ratio is a consistent estimate of the total scatter over the
-        /// declared variance, `1 + distortion`, whatever the noise level.
+        /// declared variance, `1 + distortion`, whatever the noise level. Its relative
+        /// error over 200 seeds at 1500 lines: mean 0.050 and standard deviation 0.027
+        /// at distortion 1.83 and noise 10^-4.47 (the worst of four points measured;
+        /// largest 0.110), 0.000-0.026 and 0.024-0.026 elsewhere; seed 393 there gave
+        /// 0.155. The bound is 0.2 (5.5 standard deviations from that mean).
         #[test]
         fn floor_ratio_is_consistent(seed in 0u64..10_000, x in 0.0f64..10.0, lg in -5.0f64..-2.0) {
             let fl = ratio(&data(1500, 10f64.powf(lg), x, None, seed));
-            prop_assert!((fl.ratio / (1.0 + x) - 1.0).abs() < 0.15, "{} for {}", fl.ratio, 1.0 + x);
+            prop_assert!((fl.ratio / (1.0 + x) - 1.0).abs() < 0.2, "{} for {}", fl.ratio, 1.0 + x);
             prop_assert!(fl.ratio_lower <= fl.ratio);
         }
     }
