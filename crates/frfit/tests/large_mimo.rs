@@ -390,9 +390,8 @@ fn the_compressed_delay_search_on_projected_outputs_finds_the_delay() {
 
 /// A random 4 x 4 plant with 8 modes (seed 5, 1000 lines), delayed by 13.7 us, with
 /// circular Gaussian noise of `scale` times the simulator's level (a fixed generator),
-/// fitted by `subspace -> ml` with the delay free: the final model and the ML link's
-/// messages and details.
-fn delayed_4_by_4(scale: f64) -> (frfit::chain::ChainResult, f64) {
+/// and the delay.
+fn delayed_4_by_4_data(scale: f64) -> (frf_data::Frf, f64) {
     faer::set_global_parallelism(faer::Par::Seq);
     let (ny, nu) = (4, 4);
     let r = RandomModal::generate(&RandomModalConfig {
@@ -423,6 +422,13 @@ fn delayed_4_by_4(scale: f64) -> (frfit::chain::ChainResult, f64) {
             std::f64::consts::TAU * u2,
         )
     });
+    (data, tau)
+}
+
+/// [`delayed_4_by_4_data`] fitted by `subspace -> ml` with the delay free: the final
+/// model and the ML link's messages and details.
+fn delayed_4_by_4(scale: f64) -> (frfit::chain::ChainResult, f64) {
+    let (data, tau) = delayed_4_by_4_data(scale);
     let settings = ChainSettings {
         delay: DelayChoice::Auto,
         ..Default::default()
@@ -477,6 +483,32 @@ fn a_delay_the_residues_take_up_near_exact_data_is_held_or_reported_with_its_pro
             std * 1e6
         );
     }
+}
+
+/// The branch the near-exact case took before the gradient change: a delay whose
+/// information matrix is beyond `max_condition` (here lowered to 1e11, below the 1.5e12
+/// of that optimum) is held where it is, the messages say so, and the refinement
+/// converges without it.
+#[test]
+fn a_delay_beyond_the_condition_limit_is_held_and_said() {
+    use frf_data::Estimator;
+    let (data, tau) = delayed_4_by_4_data(1e-3);
+    let (out, _) = delayed_4_by_4(1e-3);
+    assert!(out.model.model.factors.delay_fitted);
+    let ml = ml_refine::MlRefine::new(ml_refine::MlConfig {
+        max_condition: 1e11,
+        ..Default::default()
+    });
+    let fit = ml.estimate(&data, out.model.clone()).unwrap();
+    let msgs = fit.messages.join("\n");
+    println!("{msgs}");
+    assert!(
+        msgs.contains("the delay is not determined by the data"),
+        "{msgs}"
+    );
+    assert!(!fit.model.factors.delay_fitted, "{msgs}");
+    assert!((fit.model.factors.delay_s - tau).abs() < 1e-6, "{msgs}");
+    assert!(fit.convergence.is_converged(), "{msgs}");
 }
 
 /// At the simulator's noise level (1e-3) the delay of the same plant is determined,
