@@ -4,8 +4,8 @@ mod cli;
 
 /// mimalloc keeps the pages it frees for the next allocations: a large fit allocates
 /// and frees matrices of tens to hundreds of megabytes per iteration, which through
-/// the system allocator are fresh mappings every time (the kernel zeroing their pages
-/// was a fifth of a 50 x 50 fit's CPU time).
+/// the system allocator are fresh mappings every time (the kernel zeroing their pages:
+/// 8-10 s of system time in the 50-60 s of CPU time of a 50 x 50 fit).
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

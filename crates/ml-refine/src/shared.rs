@@ -232,8 +232,8 @@ impl Problem {
                 }
             }
             let q1 = qr.compute_thin_Q();
-            // the residual of each chunk of entries, kept for the Jacobian at this point
-            // per chunk: its first entry, coefficients, costs and residual
+            // per chunk of entries: its first entry, coefficients, costs and residual (kept
+            // for the Jacobian at this point)
             type Chunk = (usize, Vec<f64>, Vec<f64>, Mat<f64>);
             let chunks: Vec<Chunk> = (0..grp.entries.len())
                 .step_by(CHUNK)
@@ -298,8 +298,9 @@ impl Problem {
     }
 
     /// [`Problem::jacobian_r`] on shared weights (see the module documentation), or
-    /// `None` when the information matrix is not numerically positive definite (the
-    /// caller then runs the per-entry path).
+    /// `None` when the information matrix is not numerically positive definite or `ev`
+    /// holds no residual of these groups (not an evaluation on shared weights): the
+    /// caller then runs the per-entry path.
     pub(crate) fn jacobian_shared(
         &self,
         sh: &Shared,
@@ -350,45 +351,26 @@ impl Problem {
             let sct = Mat::from_fn(ne, n_lin, |c, l| cm[(l, c)] * grp.scale[c]);
             // `sum_e s_e c_e[l] (D^T r_e)[a] = D[:, a]^T W[:, l]` with `W = R S C^T`: one
             // product of the residual with `n_lin` columns (not with the `n_D`
-            // derivative columns), by chunks of entries on the rayon pool; the residual
-            // is the evaluation's at the same point, or computed again
-            let stored = ev
-                .residual
-                .as_ref()
-                .and_then(|r| r.get(gi))
-                .filter(|r| r.iter().map(|c| c.ncols()).sum::<usize>() == ne);
+            // derivative columns), by chunks of entries on the rayon pool, on the
+            // residual the evaluation at the same point kept (every evaluation on shared
+            // weights keeps it; without it the per-entry path runs)
+            let res = ev.residual.as_ref()?.get(gi)?;
+            if res.len() != ne.div_ceil(CHUNK) {
+                return None;
+            }
             // one accumulator per thread, over a contiguous run of chunks
-            let n_chunks = ne.div_ceil(CHUNK);
-            let runs = rayon::current_num_threads().clamp(1, n_chunks.max(1));
+            let runs = rayon::current_num_threads().clamp(1, res.len().max(1));
             let w = (0..runs)
                 .into_par_iter()
                 .map(|t| {
                     let mut w = Mat::<f64>::zeros(rows, n_lin);
-                    for ci in t * n_chunks / runs..(t + 1) * n_chunks / runs {
-                        let c0 = ci * CHUNK;
-                        let nc = CHUNK.min(ne - c0);
-                        let computed;
-                        let r = match stored {
-                            Some(s) if s[ci].ncols() == nc => s[ci].as_ref(),
-                            _ => {
-                                let mut r = grp.y.subcols(c0, nc).to_owned();
-                                matmul(
-                                    r.as_mut(),
-                                    Accum::Add,
-                                    a.as_ref(),
-                                    cm.subcols(c0, nc),
-                                    -1.0,
-                                    Par::Seq,
-                                );
-                                computed = r;
-                                computed.as_ref()
-                            }
-                        };
+                    for ci in t * res.len() / runs..(t + 1) * res.len() / runs {
+                        let r = &res[ci];
                         matmul(
                             w.as_mut(),
                             Accum::Add,
-                            r,
-                            sct.subrows(c0, nc),
+                            r.as_ref(),
+                            sct.subrows(ci * CHUNK, r.ncols()),
                             1.0,
                             Par::Seq,
                         );
