@@ -317,6 +317,50 @@ fn the_default_chain_finds_every_mode_of_a_delay_free_20_by_20_plant() {
     );
 }
 
+/// A 20 x 20 plant with 50 modes and a free rigid body (seed 11 of `frfit simulate
+/// random-modal --rigid-body`, no delay): its close pairs and a triple cluster (213.5,
+/// 215.0, 217.2 Hz) are merged by the compressed subspace start (45 pole pairs), and
+/// the ML refinement adds the five modes it lacks, one per refinement. With at most 4
+/// additions, the limit before `MlConfig::add_modes_fraction`, the cluster kept two
+/// modes and the fit ended at 33 times the noise.
+#[test]
+fn the_chain_adds_every_mode_a_large_start_merged() {
+    use frfit::pipeline::{run, PipelineConfig};
+    let r = RandomModal::generate(&RandomModalConfig {
+        ny: 20,
+        nu: 20,
+        modes: 50,
+        rigid_body: true,
+        seed: 11,
+        ..RandomModalConfig::default()
+    })
+    .unwrap();
+    let cfg = PipelineConfig {
+        hold: Some(additive_riv::Hold::None),
+        delay: Some(DelayChoice::None),
+        ..Default::default()
+    };
+    let out = run(&r.measured, "random 20 x 20 with a rigid body", &cfg, "fit").unwrap();
+    let s = &out.summary;
+    let true_f: Vec<f64> = r.plant.modes.iter().map(|m| m.f_hz).collect();
+    let fit_f: Vec<f64> = s.final_model.modes.iter().map(|m| m.f_hz).collect();
+    let n = found(&true_f, &fit_f, 1e-3);
+    println!(
+        "{n}/50 modes within 0.1 %, {} fitted, {} integrators, residual/noise {:.3}",
+        fit_f.len(),
+        s.final_model.rigid_body_integrators,
+        s.final_errors.residual_to_noise
+    );
+    assert_eq!(n, 50, "modes found: {fit_f:?}");
+    assert_eq!(fit_f.len(), 50, "no spurious mode");
+    assert_eq!(s.final_model.rigid_body_integrators, 2, "the free body");
+    assert!(
+        s.final_errors.residual_to_noise < 1.05,
+        "residual/noise {:.3}",
+        s.final_errors.residual_to_noise
+    );
+}
+
 /// `data` delayed by `tau` (every entry times `exp(-j w tau)`) plus `noise()` per entry
 /// (line after line, entries column-major), with the variance `variance` (`None`: the
 /// data's).
