@@ -86,6 +86,34 @@ impl Work {
     }
 }
 
+/// The relative change of a damped step, in the column scaling, below which a larger
+/// damping is taken to leave the step as it was ([`iterate`]): a step that raised the
+/// cost by more than [`CLEAR_RISE`] is not evaluated again with a damping that moved
+/// it by less than this. On a random 50 x 50 plant with 100 modes (seed 5 of `frfit
+/// simulate random-modal --rigid-body --close-pairs 0.2`) the second iteration
+/// raised the cost from 1.42e9 to 3.50e9, 3.50e9, 3.50e9, 3.48e9, 3.36e9 and 1.90e9
+/// as the damping grew fourfold from 2e-4, before 0.82 lowered it: six evaluations
+/// of 0.5 s. The steps at 8e-4 and 3.2e-3 differed from the one at 2e-4 by under 1 %,
+/// the one at 1.3e-2 by under 5 %; they are no longer evaluated (the refinement's 14
+/// evaluations became 11, the model the same).
+const SAME_STEP: f64 = 5e-2;
+
+/// The relative rise of the cost that marks a rejected step as clearly too long (see
+/// [`SAME_STEP`]).
+const CLEAR_RISE: f64 = 0.1;
+
+/// `||D (a - b)|| / ||D b||` with the column scaling `D` of the damped steps.
+fn scaled_change(a: &[f64], b: &[f64], dcol: &[f64]) -> f64 {
+    let num: f64 = a
+        .iter()
+        .zip(b)
+        .zip(dcol)
+        .map(|((x, y), d)| (d * (x - y)).powi(2))
+        .sum();
+    let den: f64 = b.iter().zip(dcol).map(|(y, d)| (d * y).powi(2)).sum();
+    (num / den.max(f64::MIN_POSITIVE)).sqrt()
+}
+
 /// One damped step: solves `[R; sqrt(lambda) D] d = [z; 0]` in the least-squares sense.
 fn damped_step(r: &[f64], n: usize, lambda: f64, dcol: &[f64]) -> Vec<f64> {
     let nb = n + 1;
@@ -202,8 +230,20 @@ pub(crate) fn iterate(
         let dcol = column_norms(&r, n);
         it += 1;
         let mut accepted = None;
+        // the last step of this iteration that raised the cost clearly
+        let mut raised: Option<Vec<f64>> = None;
         while lambda < 1e16 {
             let d = damped_step(&r, n, lambda, &dcol);
+            if raised
+                .as_ref()
+                .is_some_and(|prev| scaled_change(&d, prev, &dcol) < SAME_STEP)
+            {
+                // the damping has not changed the step yet (it acts only once it
+                // reaches the scaled curvature of the weak directions): the step
+                // would raise the cost as the last one did, so it is not evaluated
+                lambda *= 4.0;
+                continue;
+            }
             let trial: Vec<f64> = theta.iter().zip(&d).map(|(a, b)| a + b).collect();
             if d.iter().all(|x| x.is_finite()) && valid(&trial) {
                 let t = Instant::now();
@@ -214,6 +254,9 @@ pub(crate) fn iterate(
                     if e2.cost.is_finite() && e2.cost < ev.cost {
                         accepted = Some((trial, e2, d));
                         break;
+                    }
+                    if e2.cost.is_finite() && e2.cost > ev.cost * (1.0 + CLEAR_RISE) {
+                        raised = Some(d);
                     }
                 }
             }
