@@ -805,8 +805,31 @@ impl MlRefine {
                 let at = lay_f.delay_index().unwrap_or(theta_f.len());
                 theta_f.insert(at, model.factors.delay_s);
                 let prob_f = prob.with_layout(lay_f.clone(), model.clone());
-                if let Ok(ev) = prob_f.evaluate(&theta_f) {
-                    let n_params_f = lay_f.n_nl() + m * lay_f.n_lin();
+                let n_params_f = lay_f.n_nl() + m * lay_f.n_lin();
+                // the score test of the delay at the held optimum: the Gauss-Newton
+                // decrease of the cost with the delay free, from one Jacobian; a delay
+                // that would explain less than `min_f` times the noise (the test of the
+                // added modes and integrators) stays held instead of being refined in
+                // several iterations to an insignificant value
+                let score = prob_f.evaluate(&theta_f).ok().map(|ev| {
+                    let (r, _) = prob_f.jacobian_r(&theta_f, &ev);
+                    let nt = theta_f.len();
+                    let z2: f64 = (0..nt).map(|i| r[nt * (nt + 1) + i].powi(2)).sum();
+                    let f_stat = nested_f(
+                        (ev.cost, n_params),
+                        ((ev.cost - 0.5 * z2).max(0.0), n_params_f),
+                        (n * m) as f64,
+                    );
+                    (ev, f_stat)
+                });
+                if let Some((_, f_stat)) = score.as_ref().filter(|(_, f)| !(*f > cfg.min_f)) {
+                    messages.push(format!(
+                        "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and stays held after the structure adaptation: freed, it would explain {f_stat:.2} times the noise (the linearised decrease at the optimum, F <= {})",
+                        model.factors.delay_s * 1e6,
+                        eval_start_cost,
+                        cfg.min_f
+                    ));
+                } else if let Some((ev, _)) = score {
                     let out_f = refine(&prob_f, theta_f, ev, n_params_f, &lay_f);
                     messages.push(format!(
                         "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and freed after the structure adaptation: cost {:.4e} -> {:.4e}",
