@@ -606,7 +606,7 @@ impl MlRefine {
         };
         // A free delay is held at the start's value while the start is far above the
         // noise level, through the iterations and the structure adaptation, and freed
-        // after them: the delay otherwise absorbs the misfit of the modes the start
+        // after them when its score test passes: the delay otherwise absorbs the misfit of the modes the start
         // missed and settles where the added modes no longer fit (a random 20 x 20
         // plant with 50 modes and no delay, seed 7: a 29 us delay, 49 modes, 1900 times
         // the noise; with the delay held, every mode and the noise level).
