@@ -822,7 +822,10 @@ impl MlRefine {
                     );
                     (ev, f_stat)
                 });
-                if let Some((_, f_stat)) = score.as_ref().filter(|(_, f)| !(*f > cfg.min_f)) {
+                if let Some((_, f_stat)) = score
+                    .as_ref()
+                    .filter(|(_, f)| f.is_nan() || *f <= cfg.min_f)
+                {
                     messages.push(format!(
                         "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and stays held after the structure adaptation: freed, it would explain {f_stat:.2} times the noise (the linearised decrease at the optimum, F <= {})",
                         model.factors.delay_s * 1e6,
