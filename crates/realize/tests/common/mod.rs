@@ -123,14 +123,20 @@ pub fn random_modal(seed: u64, spec: Spec) -> (ModalModel, usize) {
             // R_1, R_2 add none beyond the block-triangular Hankel's rank).
             let r1 = random_real_rank(&mut r, ny, nu, maxr);
             let r2 = random_real_rank(&mut r, ny, nu, maxr);
-            // R_3 is drawn again until its condition number is below 100: the smallest
-            // Hankel singular value scales like sigma_min(R_3)^3, and a nearly singular
-            // R_3 (seen: condition 6e4) makes the numerical rank at 1e-12 lower than
-            // 3 min(ny, nu), which is then the right minimal order, not the one counted here.
+            // R_3 is drawn again until its smallest singular value is above 1e-2 of the
+            // largest of R_1, R_2 and R_3: the smallest Hankel singular value scales like
+            // sigma_min(R_3)^3, and a nearly singular R_3 (seen: condition 6e4), or a
+            // scalar one small beside R_2 (seen: 1 x 1, R_3 = 2.4e-5 with R_2 = 1.09, seed
+            // 16661605394426419657, realized with 9 states), makes the numerical rank at
+            // 1e-12 lower than 3 min(ny, nu), which is then the right minimal order, not
+            // the one counted here.
+            let largest =
+                |x: &Mat<f64>| x.singular_values().expect("SVD of a small finite matrix")[0];
+            let scale = largest(&r1).max(largest(&r2));
             let mut r3 = random_real_rank(&mut r, ny, nu, maxr);
             for _ in 0..1000 {
                 let sv = r3.singular_values().expect("SVD of a small finite matrix");
-                if sv[maxr - 1] > 1e-2 * sv[0] {
+                if sv[maxr - 1] > 1e-2 * sv[0].max(scale) {
                     break;
                 }
                 r3 = random_real_rank(&mut r, ny, nu, maxr);
