@@ -114,6 +114,14 @@ fn scaled_change(a: &[f64], b: &[f64], dcol: &[f64]) -> f64 {
     (num / den.max(f64::MIN_POSITIVE)).sqrt()
 }
 
+/// `||Q^T r||^2` of the `R` factor `r` of `[J | r]` (`(n + 1)^2`, column-major) with `n`
+/// parameters: the decrease of the squared residual norm (twice the cost) that the
+/// Gauss-Newton step predicts.
+pub(crate) fn linearised_decrease(r: &[f64], n: usize) -> f64 {
+    let nb = n + 1;
+    (0..n).map(|i| r[n * nb + i] * r[n * nb + i]).sum()
+}
+
 /// One damped step: solves `[R; sqrt(lambda) D] d = [z; 0]` in the least-squares sense.
 fn damped_step(r: &[f64], n: usize, lambda: f64, dcol: &[f64]) -> Vec<f64> {
     let nb = n + 1;
@@ -174,7 +182,6 @@ pub(crate) fn iterate(
     progress: &ProgressSink,
 ) -> LmOutcome {
     let n = theta0.len();
-    let nb = n + 1;
     let mut theta = theta0;
     let mut ev = eval0;
     let mut hist = vec![ev.cost];
@@ -213,7 +220,7 @@ pub(crate) fn iterate(
         };
     }
     while it < s.max_iterations {
-        let z2: f64 = (0..n).map(|i| r[n * nb + i] * r[n * nb + i]).sum();
+        let z2 = linearised_decrease(&r, n);
         let r2 = 2.0 * ev.cost;
         if r2 == 0.0 || z2 <= s.gradient_tol * r2 {
             conv = Convergence::CostTolerance {

@@ -606,10 +606,11 @@ impl MlRefine {
         };
         // A free delay is held at the start's value while the start is far above the
         // noise level, through the iterations and the structure adaptation, and freed
-        // after them when its score test passes: the delay otherwise absorbs the misfit of the modes the start
-        // missed and settles where the added modes no longer fit (a random 20 x 20
-        // plant with 50 modes and no delay, seed 7: a 29 us delay, 49 modes, 1900 times
-        // the noise; with the delay held, every mode and the noise level).
+        // after them when its score test passes: the delay otherwise absorbs the misfit
+        // of the modes the start missed and settles where the added modes no longer fit
+        // (a random 20 x 20 plant with 50 modes and no delay, seed 7: a 29 us delay, 49
+        // modes, 1900 times the noise; with the delay held, every mode and the noise
+        // level).
         let eval_start_cost = eval0.cost;
         let (prob, theta, eval0, lay, n_params, held_delay) =
             if lay.delay && misfit(eval0.cost, n_params) {
@@ -642,8 +643,9 @@ impl MlRefine {
         let max_added = if cfg.add_modes == 0 {
             0
         } else {
-            let scaled = (cfg.add_modes_fraction.max(0.0) * lay.n_pairs as f64).ceil();
-            cfg.add_modes.max(scaled.min(usize::MAX as f64) as usize)
+            // `as` saturates (and takes NaN to 0)
+            let scaled = (cfg.add_modes_fraction.max(0.0) * lay.n_pairs as f64).ceil() as usize;
+            cfg.add_modes.max(scaled)
         };
         while added.len() < max_added
             && out.convergence.is_converged()
@@ -813,8 +815,7 @@ impl MlRefine {
                 // several iterations to an insignificant value
                 let score = prob_f.evaluate(&theta_f).ok().map(|ev| {
                     let (r, _) = prob_f.jacobian_r(&theta_f, &ev);
-                    let nt = theta_f.len();
-                    let z2: f64 = (0..nt).map(|i| r[nt * (nt + 1) + i].powi(2)).sum();
+                    let z2 = crate::lm::linearised_decrease(&r, theta_f.len());
                     let f_stat = nested_f(
                         (ev.cost, n_params),
                         ((ev.cost - 0.5 * z2).max(0.0), n_params_f),
