@@ -119,11 +119,13 @@ fn a_suspension_stiffness_is_found() {
 
 /// A genuine low mode beside a free body is not a suspension: a mode at 3 Hz with
 /// five times the body's residue, lines from 2 Hz, where the mode carries most of the
-/// lowest lines but the free body's `R / s^2` a significant part beside it. Whether or not the suspended-body reading is tested,
-/// no stiffness is accepted, and the final model keeps the free body (two integrators)
-/// and the mode.
+/// lowest lines but the free body's `R / s^2` a significant part beside it. The CMIF
+/// start misses the mode (1.5 dB over the band edge) and the first fit, 141 times the
+/// noise, takes the body as `R / s`; the residual's suspension signature is then read
+/// both ways (a suspension, and a mode beside the free body as `R / s` and `R / s^2`),
+/// and the body's parameters beside the suspension decide. No stiffness is accepted,
+/// and the final model keeps the free body (two integrators) and the mode.
 #[test]
-#[ignore = "known failure (the first fit and the signature-proposed stiffness, not the suspended-body reading, which runs only at the noise level): the first fit ends at residual/noise 141 (median 2.3e-2) and the loop's stiffness candidate from the low-frequency signature replaces the free body by a suspension at 3.004 Hz beside the 3 Hz mode (F = 3.8e5), then adds an input factor and ends unexplained at 13.5x the noise; the same with mode residues 2..10 times the body's and lines from 1..2 Hz; tried and not kept: a missed mode proposed at the stiffness signature's frequency beside the free body makes this test pass (2.99998 Hz, zeta 0.0500, noise-limited), but on a_suspension_stiffness_is_found that mode (2.49 Hz) then wins over the stiffness, and the suspended-body reading, which takes the mode carrying the most of the lowest line, relabels the 40 Hz mode as the suspension (it carries 1.6e-4 there against the suspension's 4e-6); run with --ignored"]
 fn a_low_mode_beside_a_free_body_is_not_a_stiffness() {
     let f_l = 3.0;
     let data = measured(Body::FreeWithLowMode(f_l, 5.0), 2.0, 11);
@@ -166,4 +168,96 @@ fn a_low_mode_beside_a_free_body_is_not_a_stiffness() {
         "the low mode"
     );
     assert_eq!(s.verdict, "noise_limited");
+}
+
+/// Checks a diagnosis of a free body with a low mode: the mode is found as a
+/// `missed_mode` (within 2 %), no stiffness, two integrators, the three plate modes,
+/// the noise level.
+fn assert_low_mode_found(f_l: f64, gain: f64, lo_hz: f64, seed: u64) {
+    let data = measured(Body::FreeWithLowMode(f_l, gain), lo_hz, seed);
+    let cfg = PipelineConfig {
+        diagnose: true,
+        ..Default::default()
+    };
+    let s = run(&data, "free body with a low mode", &cfg, "diagnose")
+        .unwrap()
+        .summary;
+    let what = format!(
+        "mode at {f_l} Hz with {gain} times the body's residue, lines from {lo_hz} Hz: steps {:?}, verdict {}",
+        s.steps
+            .iter()
+            .filter(|x| x.accepted)
+            .map(|x| format!("{} {}", x.effect, x.params))
+            .collect::<Vec<_>>(),
+        s.verdict
+    );
+    assert!(
+        !s.steps
+            .iter()
+            .any(|x| x.accepted && x.effect == "stiffness"),
+        "{what}"
+    );
+    assert_eq!(s.final_model.rigid_body_integrators, 2, "{what}");
+    assert_eq!(s.final_model.modes.len(), 4, "{what}");
+    assert!(
+        s.final_model
+            .modes
+            .iter()
+            .any(|m| (m.f_hz / f_l - 1.0).abs() < 0.02),
+        "{what}"
+    );
+    assert_eq!(s.verdict, "noise_limited", "{what}");
+}
+
+/// Low modes of other sizes and places beside the free body (residue half to twenty
+/// times the body's, 2 to 8 Hz, lines from 1 or 2 Hz; with lines from 2 Hz and a mode
+/// at 3 Hz of twice the body's residue, the first fit takes the body as `R / s`, so
+/// the mode is only found with the body as `R / s^2` again).
+#[test]
+fn low_modes_of_other_sizes_beside_a_free_body_are_modes() {
+    for (f_l, gain, lo_hz, seed) in [
+        (3.0, 2.0, 2.0, 3),
+        (5.0, 5.0, 2.0, 3),
+        (8.0, 3.0, 2.0, 4),
+        (3.0, 0.5, 2.0, 5),
+        (2.0, 20.0, 1.0, 6),
+    ] {
+        assert_low_mode_found(f_l, gain, lo_hz, seed);
+    }
+}
+
+/// Suspensions below, at and inside the band's low edge are stiffnesses, not a mode
+/// beside the free body: the body's parameters beside the suspension are not
+/// significant.
+#[test]
+fn suspensions_at_other_frequencies_are_stiffnesses() {
+    for (f_s, lo_hz, seed) in [(1.5, 4.0, 5), (2.5, 2.0, 5), (5.0, 2.0, 6), (8.0, 4.0, 7)] {
+        let data = measured(Body::Suspended(f_s), lo_hz, seed);
+        let cfg = PipelineConfig {
+            diagnose: true,
+            ..Default::default()
+        };
+        let s = run(&data, "suspended", &cfg, "diagnose").unwrap().summary;
+        let accepted: Vec<String> = s
+            .steps
+            .iter()
+            .filter(|x| x.accepted)
+            .map(|x| format!("{} {}", x.effect, x.params))
+            .collect();
+        let what = format!(
+            "suspension at {f_s} Hz, lines from {lo_hz} Hz: steps {accepted:?}, verdict {}",
+            s.verdict
+        );
+        let stiff: Vec<_> = s
+            .steps
+            .iter()
+            .filter(|x| x.accepted && x.effect == "stiffness")
+            .collect();
+        assert_eq!(stiff.len(), 1, "{what}");
+        let f = stiff[0].params["f_hz"].as_f64().unwrap();
+        assert!((f / f_s - 1.0).abs() < 0.05, "{what}");
+        assert_eq!(s.final_model.rigid_body_integrators, 0, "{what}");
+        assert_eq!(s.final_model.modes.len(), 3, "{what}");
+        assert_eq!(s.verdict, "noise_limited", "{what}");
+    }
 }

@@ -33,6 +33,14 @@ pub enum Candidate {
         /// The residual peak that called for it, Hz: the refit must remove most of the
         /// residual around it.
         peak_hz: f64,
+        /// `Some(l)`: proposed beside the free rigid body, as `R / s^l`, as the other
+        /// reading of the residual's suspension signature (a low mode rather than a
+        /// suspended body, [`propose`]); tested in the same round as that `stiffness`
+        /// and judged against it ([`super::trial::mode_or_suspension`]). The body's
+        /// integrators are set to `l`: the first fit chose them without the mode, whose
+        /// response below it can pass for a body of the other order. `None`: a mode at a
+        /// residual peak.
+        body_integrators: Option<usize>,
     },
     /// A delay beyond the model's, fitted (refined in the iterations).
     Delay {
@@ -206,7 +214,14 @@ impl Candidate {
     /// the others (tested again whenever proposed).
     pub fn key(&self) -> String {
         match self {
-            Candidate::MissedMode { peak_hz, .. } => mode_key(*peak_hz),
+            Candidate::MissedMode {
+                peak_hz,
+                body_integrators,
+                ..
+            } => match body_integrators {
+                Some(l) => format!("{}:body{l}", mode_key(*peak_hz)),
+                None => mode_key(*peak_hz),
+            },
             Candidate::InputDynamics { inputs: v, start }
             | Candidate::OutputDynamics { outputs: v, start } => {
                 let which = if v.len() > 1 {
@@ -247,7 +262,18 @@ impl Candidate {
     /// the structure changed: refit them).
     pub fn augment(&self, model: &AdditiveModel) -> Result<AdditiveModel, RivError> {
         match self {
-            Candidate::MissedMode { f_hz, zeta, .. } => augment::with_mode(model, *f_hz, *zeta),
+            Candidate::MissedMode {
+                f_hz,
+                zeta,
+                body_integrators,
+                ..
+            } => {
+                let mut m = augment::with_mode(model, *f_hz, *zeta)?;
+                if let Some(l) = *body_integrators {
+                    with_body_integrators(&mut m, l)?;
+                }
+                Ok(m)
+            }
             Candidate::Delay { seconds, .. } => augment::with_fitted_delay(model, *seconds),
             Candidate::Hold { fs_hz } => augment::to_exact_hold(model, *fs_hz),
             Candidate::Feedthrough {
@@ -777,6 +803,23 @@ pub fn suspended_body(model: &AdditiveModel, omega_low: f64) -> Option<Proposal>
     })
 }
 
+/// The free rigid body of `model` as `R / s^l` (numerator zero when `l` changes: refit
+/// it), at the body's own scale; an error when `model` has no free rigid body.
+fn with_body_integrators(model: &mut AdditiveModel, l: usize) -> Result<(), RivError> {
+    let i = model
+        .submodels
+        .iter()
+        .position(|s| s.kind == SubmodelKind::RigidBody && s.integrators >= 1)
+        .ok_or_else(|| RivError::Structure("no free rigid body (1/s^l) to keep".into()))?;
+    if model.submodels[i].integrators == l {
+        return Ok(());
+    }
+    let scale = model.submodels[i].scale;
+    model.remove_submodel(i);
+    model.push_rigid_body(l, scale)?;
+    Ok(())
+}
+
 /// The key of a missed mode at `f_hz` (its frequency to 0.1 Hz).
 fn mode_key(f_hz: f64) -> String {
     format!("{:.0}", f_hz * 10.0)
@@ -842,6 +885,7 @@ pub fn propose(
                     f_hz: f,
                     zeta,
                     peak_hz: f,
+                    body_integrators: None,
                 },
                 ev,
             );
@@ -911,6 +955,29 @@ pub fn propose(
                 },
                 detail(an, Effect::Stiffness),
             );
+            // The same signature read as a low mode beside the free body: a suspension
+            // replaces the body's `R / s^l` by `R / (s^2 + 2 zeta w s + w^2)`, a low mode
+            // keeps the body and adds the resonance. The two refits are nested (the free
+            // body's parameters at zero give the suspension), so the round decides
+            // between them by the F test of the body's parameters. The body is tried as
+            // `R / s` and `R / s^2` (velocity or displacement of a free body).
+            for l in [1, 2] {
+                let c = Candidate::MissedMode {
+                    f_hz: f,
+                    zeta: s.zeta.clamp(0.002, 0.2),
+                    peak_hz: f,
+                    body_integrators: Some(l),
+                };
+                if !seen(Effect::MissedMode, &c.key()) {
+                    push(
+                        c,
+                        format!(
+                            "the suspension signature at {f:.3} Hz read as a mode beside the free rigid body R / s^{l}; {}",
+                            detail(an, Effect::Stiffness)
+                        ),
+                    );
+                }
+            }
         }
     }
     propose_dynamics(model, an, fd, alpha, &seen, &mut push);

@@ -356,10 +356,20 @@ fn round(
         && has(Effect::Delay))
     .then(|| st.delay_restart.take());
     st.restart_tested |= restart.is_some();
-    let joint = has(Effect::MissedMode);
-    let (modes, others): (Vec<Proposal>, Vec<Proposal>) = proposals
-        .into_iter()
-        .partition(|p| p.candidate.effect() == Effect::MissedMode);
+    // a mode proposed as the other reading of the suspension signature is no residual
+    // peak: it runs beside that stiffness in the first wave, judged against it
+    let peak_mode = |p: &Proposal| {
+        matches!(
+            p.candidate,
+            Candidate::MissedMode {
+                body_integrators: None,
+                ..
+            }
+        )
+    };
+    let joint = proposals.iter().any(peak_mode);
+    let (modes, others): (Vec<Proposal>, Vec<Proposal>) =
+        proposals.into_iter().partition(peak_mode);
     let mut first_wave: Vec<Job> = Vec::new();
     if joint {
         first_wave.push(Job::JointModes);
@@ -463,6 +473,8 @@ fn round(
     }
     // a factor's zeros must be significant beside the same factor without them
     trial::test_zeros(&mut trials, fd, cfg, &current);
+    // a low mode beside the free body and a suspended body: the body's parameters decide
+    trial::mode_or_suspension(&mut trials, fd, cfg);
     st.n_tests = n_tests.into_inner();
     (!trials.is_empty()).then_some(trials)
 }

@@ -706,6 +706,83 @@ pub fn test_zeros(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConfig, curr
     }
 }
 
+/// A low mode beside the free rigid body or a suspended body: for a round that refitted
+/// both readings of the residual's suspension signature (the `stiffness` and the
+/// `missed_mode` proposed beside the free body, [`super::candidate::propose`]) and both
+/// passed, the free body's parameters decide. The two models are nested: the mode's
+/// model with the free body's residues at zero is the suspension's (a pair in place of
+/// `R / s^2`), so the F test of those parameters (the cost the mode's model lowers
+/// below the suspension's, per parameter it has more) at `cfg` tells them apart:
+///
+/// - significant: the body is free and the resonance a mode beside it; the stiffness is
+///   held below its critical value;
+/// - not significant, or the mode's model fits no better: the suspension is the simpler
+///   model of the same physics; the mode is held below its critical value.
+///
+/// On a body suspended at 2.5 Hz (lines from 4 Hz) the mode beside the free body fits
+/// as well as the suspension with more parameters; on a free body with a mode at 3 Hz
+/// of five times its residue (lines from 2 Hz) the suspension leaves the body's part
+/// unexplained.
+pub fn mode_or_suspension(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConfig) {
+    let beside_body = |t: &Trial| {
+        matches!(
+            t.candidate,
+            Some(super::Candidate::MissedMode {
+                body_integrators: Some(_),
+                ..
+            })
+        )
+    };
+    let suspension = |t: &Trial| {
+        matches!(
+            t.candidate,
+            Some(super::Candidate::Stiffness { replaces: None, .. })
+        )
+    };
+    let Some(si) = trials.iter().position(|t| suspension(t) && t.passes()) else {
+        return;
+    };
+    // the better of the two free bodies
+    let Some(mi) = (0..trials.len())
+        .filter(|&i| beside_body(&trials[i]) && trials[i].passes())
+        .min_by(|&a, &b| trials[a].cost.total_cmp(&trials[b].cost))
+    else {
+        return;
+    };
+    let (mode, susp) = (&trials[mi], &trials[si]);
+    let extra = mode.model.n_params().saturating_sub(susp.model.n_params());
+    let (f, f_crit) = if extra > 0 && mode.cost < susp.cost {
+        let (_, f, f_crit) = f_test(&mode.model, fd, susp.cost, mode.cost, extra, cfg);
+        (f, f_crit)
+    } else {
+        (0.0, f64::INFINITY)
+    };
+    let hold = |t: &mut Trial, note: &str| {
+        t.evidence = format!("{}; {note}", t.evidence);
+        t.f = t.f.min(t.f_crit * (1.0 - 1e-12));
+    };
+    if f > f_crit {
+        let note = format!(
+            "the free rigid body beside the mode at {:.3} Hz is significant ({extra} parameter(s), cost {:.4e} -> {:.4e}, F = {f:.3e} > {f_crit:.3}): a mode beside a free body, not a suspension; not accepted",
+            match mode.params {
+                FittedEffect::MissedMode { f_hz, .. } => f_hz,
+                _ => f64::NAN,
+            },
+            susp.cost,
+            mode.cost
+        );
+        hold(&mut trials[si], &note);
+    } else {
+        let note = format!(
+            "beside the suspension's refit (cost {:.4e}) the free rigid body's {extra} parameter(s) are not significant (F = {f:.3e}, critical {f_crit:.3}): the suspension is the simpler model; not accepted",
+            susp.cost
+        );
+        for t in trials.iter_mut().filter(|t| beside_body(t)) {
+            hold(t, &note);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::remaining_decrease;
