@@ -592,13 +592,18 @@ impl MlRefine {
         };
         // one refinement of `p` (structure `l`, `n_params` parameters) from `theta`,
         // evaluated as `ev`
+        // the cost has a noise scale only with a measured variance
+        let lm = LmSettings {
+            gross_misfit_ratio: cfg.lm.gross_misfit_ratio.filter(|_| measured),
+            ..cfg.lm.clone()
+        };
         let refine = |p: &Problem, theta: Vec<f64>, ev, n_params: usize, l: &Layout| {
             iterate(
                 p,
                 theta,
                 ev,
                 (n * m) as f64 - n_params as f64 / 2.0,
-                &cfg.lm,
+                &lm,
                 valid(l.n_pairs),
                 leaving(l.n_pairs, l.n_real),
                 &cfg.progress,
