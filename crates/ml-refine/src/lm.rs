@@ -213,7 +213,7 @@ pub(crate) fn iterate(
     let data_energy: f64 = prob
         .g
         .iter()
-        .zip(&prob.sw)
+        .zip(prob.sw.iter())
         .map(|(g, s)| (s * g.norm()).powi(2))
         .sum::<f64>()
         / 2.0;
