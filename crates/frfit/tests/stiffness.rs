@@ -127,47 +127,7 @@ fn a_suspension_stiffness_is_found() {
 /// and the final model keeps the free body (two integrators) and the mode.
 #[test]
 fn a_low_mode_beside_a_free_body_is_not_a_stiffness() {
-    let f_l = 3.0;
-    let data = measured(Body::FreeWithLowMode(f_l, 5.0), 2.0, 11);
-    let cfg = PipelineConfig {
-        diagnose: true,
-        ..Default::default()
-    };
-    let out = run(&data, "free body with a low mode", &cfg, "diagnose").unwrap();
-    let s = &out.summary;
-    println!("initial {:?}", s.initial.errors);
-    for st in &s.steps {
-        println!(
-            "  {} accepted={} F={:.3} (crit {:.3}) {} {} median {:.3e} -> {:.3e}",
-            st.effect,
-            st.accepted,
-            st.f_statistic,
-            st.f_critical,
-            st.params,
-            st.evidence,
-            st.before.median_rel,
-            st.after.median_rel
-        );
-    }
-    println!(
-        "verdict {} final {:?}: {}",
-        s.verdict, s.final_errors, s.verdict_evidence
-    );
-    assert!(
-        !s.steps
-            .iter()
-            .any(|x| x.accepted && x.effect == "stiffness"),
-        "no stiffness step"
-    );
-    assert_eq!(s.final_model.rigid_body_integrators, 2, "the free body");
-    assert!(
-        s.final_model
-            .modes
-            .iter()
-            .any(|m| (m.f_hz / f_l - 1.0).abs() < 0.02),
-        "the low mode"
-    );
-    assert_eq!(s.verdict, "noise_limited");
+    assert_low_mode_found(3.0, 5.0, 2.0, 11);
 }
 
 /// Checks a diagnosis of a free body with a low mode: the mode is found as a
