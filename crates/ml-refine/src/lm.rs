@@ -38,9 +38,9 @@ pub struct LmSettings {
     /// model misses structure, not accuracy: the iterations stop when an accepted step
     /// lowers the cost by less than [`Self::misfit_cost_tol`] (the decreases shrink
     /// geometrically there, by a factor of 3 to 10 per step, so what is left is of that
-    /// order). The structure
-    /// adaptation that follows (added modes) refits every parameter, so the tail of
-    /// geometrically shrinking decreases is not worth its Jacobians (a random 20 x 20
+    /// order). The structure adaptation that follows (added modes) refits every
+    /// parameter, so the tail of geometrically shrinking decreases is not worth its
+    /// Jacobians (a random 20 x 20
     /// plant with 50 modes, seed 11, whose subspace start merged five: the first
     /// refinement ran 8 more iterations at a cost 8e4 times the degrees of freedom,
     /// each lowering it by 4e-5 to 6e-9 of itself). `None`: no such stop (the

@@ -606,13 +606,14 @@ impl MlRefine {
         // model that lacks modes at a higher noise (a random 20 x 20 plant with 50 modes
         // at 1 % noise, seed 33: three modes missed at a ratio of 1.71) gets them
         let lacks_structure = |cost: f64, n_params: usize| misfit_over(cost, n_params, ADAPT_RATIO);
-        // one refinement of `p` (structure `l`, `n_params` parameters) from `theta`,
-        // evaluated as `ev`
-        // the cost has a noise scale only with a measured variance
+        // the stop of a gross misfit needs the cost in units of the noise: a measured
+        // variance
         let lm = LmSettings {
             gross_misfit_ratio: cfg.lm.gross_misfit_ratio.filter(|_| measured),
             ..cfg.lm.clone()
         };
+        // one refinement of `p` (structure `l`, `n_params` parameters) from `theta`,
+        // evaluated as `ev`
         let refine = |p: &Problem, theta: Vec<f64>, ev, n_params: usize, l: &Layout| {
             iterate(
                 p,

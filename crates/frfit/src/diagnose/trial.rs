@@ -59,6 +59,13 @@ impl Trial {
     pub fn passes(&self) -> bool {
         self.f > self.f_crit
     }
+
+    /// Holds the trial below its critical value (it cannot be accepted) and appends
+    /// `note`, the reason, to its evidence.
+    pub fn hold_back(&mut self, note: &str) {
+        self.evidence = format!("{}; {note}", self.evidence);
+        self.f = self.f.min(self.f_crit * (1.0 - 1e-12));
+    }
 }
 
 /// The weighted cost `sum w |E|^2` of `model` on `fd`.
@@ -664,19 +671,15 @@ pub fn test_zeros(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConfig, curr
                 .any(|z| z.norm() / std::f64::consts::TAU > f_far)
         });
         if far_zero {
-            t.evidence = format!(
-                "{}; its refit put a zero above {f_far:.0} Hz, beyond what the band shows; not accepted",
-                t.evidence
-            );
-            t.f = t.f.min(t.f_crit * (1.0 - 1e-12));
+            t.hold_back(&format!(
+                "its refit put a zero above {f_far:.0} Hz, beyond what the band shows; not accepted"
+            ));
             continue;
         }
         if c.is_common_factor() && rhp_zero {
-            t.evidence = format!(
-                "{}; its refit put a zero in the right half-plane on every entry: the Pade form of a delay, which the delay explains with one parameter; not accepted",
-                t.evidence
+            t.hold_back(
+                "its refit put a zero in the right half-plane on every entry: the Pade form of a delay, which the delay explains with one parameter; not accepted",
             );
-            t.f = t.f.min(t.f_crit * (1.0 - 1e-12));
             continue;
         }
         let key = c.key();
@@ -757,10 +760,6 @@ pub fn mode_or_suspension(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConf
     } else {
         (0.0, f64::INFINITY)
     };
-    let hold = |t: &mut Trial, note: &str| {
-        t.evidence = format!("{}; {note}", t.evidence);
-        t.f = t.f.min(t.f_crit * (1.0 - 1e-12));
-    };
     if f > f_crit {
         let note = format!(
             "the free rigid body beside the mode at {:.3} Hz is significant ({extra} parameter(s), cost {:.4e} -> {:.4e}, F = {f:.3e} > {f_crit:.3}): a mode beside a free body, not a suspension; not accepted",
@@ -771,14 +770,14 @@ pub fn mode_or_suspension(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConf
             susp.cost,
             mode.cost
         );
-        hold(&mut trials[si], &note);
+        trials[si].hold_back(&note);
     } else {
         let note = format!(
             "beside the suspension's refit (cost {:.4e}) the free rigid body's {extra} parameter(s) are not significant (F = {f:.3e}, critical {f_crit:.3}): the suspension is the simpler model; not accepted",
             susp.cost
         );
         for t in trials.iter_mut().filter(|t| beside_body(t)) {
-            hold(t, &note);
+            t.hold_back(&note);
         }
     }
 }
