@@ -123,6 +123,10 @@ pub struct DelayEstimate {
     pub n_lines: usize,
 }
 
+/// Grid points of the coarse delay search between exact recomputations of the phasors
+/// (the others advance them by one complex product).
+const COARSE_RESYNC: usize = 64;
+
 /// The smallest number of usable lines (f > 0, non-zero response) [`estimate_delay`]
 /// accepts: with fewer, the periodogram cannot separate a delay from the phase of the
 /// response itself.
@@ -257,11 +261,37 @@ pub fn estimate_delay(
         }
         acc
     };
-    // Coarse grid.
+    // Coarse grid. The phasors `e^{2 j w_k tau}` advance by `e^{2 j w_k step}` from one
+    // grid point to the next: one complex product per line instead of a sine and a
+    // cosine. They are recomputed exactly every `COARSE_RESYNC` points, so that the
+    // rounding of the products never accumulates beyond that many steps.
     let mut best = (lo, f64::NEG_INFINITY);
+    let (mut z_re, mut z_im) = (vec![0.0; w.len()], vec![0.0; w.len()]);
+    let (r_re, r_im): (Vec<f64>, Vec<f64>) = w
+        .iter()
+        .map(|wk| {
+            let (sn, cs) = (2.0 * wk * step).sin_cos();
+            (cs, sn)
+        })
+        .unzip();
     for g in 0..n_grid {
         let tau = (lo + g as f64 * step).min(hi);
-        let v = d(tau).abs();
+        let exact = g % COARSE_RESYNC == 0 || tau == hi;
+        if exact {
+            for (k, wk) in w.iter().enumerate() {
+                (z_im[k], z_re[k]) = (2.0 * wk * tau).sin_cos();
+            }
+        } else {
+            for k in 0..w.len() {
+                let re = z_re[k] * r_re[k] - z_im[k] * r_im[k];
+                z_im[k] = z_re[k] * r_im[k] + z_im[k] * r_re[k];
+                z_re[k] = re;
+            }
+        }
+        let acc: f64 = (0..w.len())
+            .map(|k| s[k].re * z_re[k] - s[k].im * z_im[k])
+            .sum();
+        let v = acc.abs();
         if v > best.1 {
             best = (tau, v);
         }
