@@ -124,6 +124,16 @@ impl Layout {
     }
 }
 
+/// The groups of entries with proportional weights ([`Shared::new`]) for a problem whose
+/// model is `template`: they hold without dynamics factors only.
+fn weight_groups(template: &FrfModel, sw: &[f64], g: &[C64], m: usize) -> Option<Arc<Shared>> {
+    if template.factors.dynamics.is_empty() {
+        Shared::new(sw, g, m).map(Arc::new)
+    } else {
+        None
+    }
+}
+
 /// The refinement problem: data, weights and structure.
 ///
 /// The data, weights and weight groups do not change with the structure: they are
@@ -195,14 +205,14 @@ impl Problem {
     /// The same data and weights with another structure `lay` (a mode added or
     /// dropped, the delay held or freed) and template `template`.
     pub fn with_layout(&self, lay: Layout, template: FrfModel) -> Problem {
-        // the weight groups hold without dynamics factors only
-        let shared = if template.factors.dynamics.is_empty() {
-            match &self.shared {
-                Some(sh) if self.template.factors.dynamics.is_empty() => Some(Arc::clone(sh)),
-                _ => Shared::new(&self.sw, &self.g, lay.m()).map(Arc::new),
-            }
+        // the weight groups depend on the data and weights alone: without dynamics
+        // factors on either side they are this problem's (also when sharing did not pay)
+        let shared = if self.template.factors.dynamics.is_empty() {
+            self.shared
+                .clone()
+                .filter(|_| template.factors.dynamics.is_empty())
         } else {
-            None
+            weight_groups(&template, &self.sw, &self.g, lay.m())
         };
         Problem::assemble(
             lay,
@@ -221,11 +231,7 @@ impl Problem {
         sw: Vec<f64>,
         template: FrfModel,
     ) -> Self {
-        let shared = if template.factors.dynamics.is_empty() {
-            Shared::new(&sw, &g, lay.m()).map(Arc::new)
-        } else {
-            None
-        };
+        let shared = weight_groups(&template, &sw, &g, lay.m());
         Problem::assemble(
             lay,
             Arc::new(omega),
