@@ -36,6 +36,7 @@ pub use model::{
     SubmodelKind,
 };
 pub mod numerators;
+pub mod pair_start;
 pub mod problem;
 pub mod riv;
 pub mod significance;

@@ -11,6 +11,7 @@
 //! is kept only when the F statistic of its parameters passes at significance `alpha`.
 
 use crate::complete::EXACT_FIT_REL;
+use crate::pair_start::with_local_pairs;
 use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
 use crate::riv::{iterate, RivConfig};
 use crate::significance::{chi2_upper, f_statistic, noise_scale, submodel_cost_increase};
@@ -539,7 +540,15 @@ pub fn adapt_modes(
         changed |= !added.is_empty();
         // A round whose new modes make the problem singular (a peak of a residual at
         // rounding level, a mode on top of another) is undone, not an error of the fit.
-        let attempt = fit_numerators(&mut model, data).and_then(|_| iterate(model, data, &coarse));
+        // an added mode inside a fitted mode's bandwidth (a merged close pair) starts
+        // from the pair settled on its own lines when that lowers the cost
+        // ([`crate::pair_start`])
+        let attempt = fit_numerators(&mut model, data).and_then(|_| {
+            if let Some(better) = with_local_pairs(&model, data, &stats, n_old, &added, riv) {
+                model = better;
+            }
+            iterate(model, data, &coarse)
+        });
         let mut refit = match attempt {
             Ok(f) => f,
             Err(RivError::Numerical { why, .. }) => {
