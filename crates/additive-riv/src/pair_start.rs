@@ -21,6 +21,7 @@
 use crate::complete::cost_of;
 use crate::problem::FitData;
 use crate::riv::{iterate, RivConfig};
+use crate::split::{floor_t, lines_within, pole_of, typical_mean};
 use crate::structure::{line_spacing_near, ResidualStats};
 use crate::{fit_numerators, AdditiveModel, Submodel, SubmodelKind};
 use frf_data::{Convergence, ModelStructure, ProgressSink};
@@ -52,14 +53,11 @@ pub const MIN_SEPARATION_HALF_WIDTHS: f64 = 0.5;
 /// refinement.
 pub const MAX_COST_RATIO: f64 = 0.1;
 
-/// Natural frequency (Hz) and damping of submodel `i`, when it is a resonance.
+/// Natural frequency (Hz) and damping of submodel `i`, when it is a mode.
 fn resonance(model: &AdditiveModel, i: usize) -> Option<(f64, f64)> {
-    if model.submodels[i].kind != SubmodelKind::Mode {
-        return None;
-    }
-    let p = model.upper_pole(&model.submodels[i])?;
-    let f = p.norm() / TAU;
-    (f.is_finite() && f > 0.0).then(|| (f, -p.re / p.norm()))
+    (model.submodels[i].kind == SubmodelKind::Mode)
+        .then(|| pole_of(model, i))
+        .flatten()
 }
 
 /// The mode among the first `n_old` submodels of `model` whose half-power bandwidth holds
@@ -112,7 +110,8 @@ pub fn local_pair(
     let (a, b) = window(data, f_old.min(f_new), f_old.max(f_new), hw);
     let m = data.m();
     let n_local = b - a;
-    // two modes: their numerators per entry and four denominator parameters
+    // two modes: their numerators per entry and four denominator parameters, with at
+    // least four real observations per parameter
     let per_entry: usize = [old, new]
         .iter()
         .map(|&i| model.submodels[i].num.len())
@@ -132,12 +131,10 @@ pub fn local_pair(
     }
     local.factor.fit_delay = false;
     let p_far = far.response_at(&omega);
-    let g: Vec<_> = (0..n_local)
-        .flat_map(|k| {
-            let line = p_far.line(k);
-            (0..m).map(move |e| (k, e, line[e]))
-        })
-        .map(|(k, e, p)| data.g[(a + k) * m + e] - p)
+    let g: Vec<_> = data.g[a * m..b * m]
+        .iter()
+        .zip(&p_far.values)
+        .map(|(g, p)| g - p)
         .collect();
     let w = data.w[a * m..b * m].to_vec();
     let local_data = FitData::from_parts(omega, data.ny, data.nu, g, w, data.band_hz);
@@ -182,46 +179,46 @@ pub const OVER_TYPICAL: f64 = 4.0;
 /// quintile), as [`crate::split::SplitConfig::min_excess`].
 pub const MIN_EXCESS: f64 = 4.0;
 
-/// The mean per-line statistic around each of the first `n_old` submodels of `model`
-/// that is a resonance (its neighbourhood: [`WINDOW_HALF_WIDTHS`] half-widths either
-/// side, at least 1 % of its frequency and 3 lines), `None` for the others.
-fn neighbourhood_means(
-    model: &AdditiveModel,
-    data: &FitData,
-    stats: &ResidualStats,
-    n_old: usize,
-) -> Vec<Option<f64>> {
-    (0..n_old.min(model.submodels.len()))
-        .map(|i| {
-            let (f, zeta) = resonance(model, i)?;
-            let half = (WINDOW_HALF_WIDTHS * zeta.abs() * f)
-                .max(0.01 * f)
-                .max(3.0 * line_spacing_near(data, f));
-            let a = data.omega.partition_point(|&w| w < TAU * (f - half));
-            let b = data.omega.partition_point(|&w| w <= TAU * (f + half));
-            (b > a).then(|| stats.t[a..b].iter().sum::<f64>() / (b - a) as f64)
-        })
-        .collect()
+/// What [`with_local_pairs`] compares a partner's neighbourhood with, from the residual
+/// statistic `stats` of the model before the modes were added: the mean per-line
+/// statistic around each of the first `n_old` submodels that is a mode (its
+/// neighbourhood: [`WINDOW_HALF_WIDTHS`] half-widths either side, at least 1 % of its
+/// frequency and 3 lines, as the close-pair split's), the typical one among them and
+/// the band's quiet level.
+struct Neighbourhoods {
+    means: Vec<Option<f64>>,
+    typical: f64,
+    quiet: f64,
 }
 
-/// True when the residual around fitted mode `partner` stands out ([`OVER_TYPICAL`],
-/// [`MIN_EXCESS`]) in `stats` (the residual of the model before the modes were added).
-fn stands_out(means: &[Option<f64>], stats: &ResidualStats, partner: usize) -> bool {
-    let Some(Some(mine)) = means.get(partner).copied() else {
-        return false;
-    };
-    let mut all: Vec<f64> = means.iter().flatten().copied().collect();
-    all.sort_by(|a, b| a.total_cmp(b));
-    // the lower median: with two modes, one of them merged, the other is the typical
-    let typical = if all.len() >= 2 {
-        all[(all.len() - 1) / 2]
-    } else {
-        0.0
-    };
-    let mut t = stats.t.clone();
-    t.sort_by(|a, b| a.total_cmp(b));
-    let quiet = t[t.len() / 5];
-    mine >= OVER_TYPICAL * typical && mine >= MIN_EXCESS * quiet
+impl Neighbourhoods {
+    fn new(model: &AdditiveModel, data: &FitData, stats: &ResidualStats, n_old: usize) -> Self {
+        let means: Vec<Option<f64>> = (0..n_old.min(model.submodels.len()))
+            .map(|i| {
+                let (f, zeta) = resonance(model, i)?;
+                let half = (WINDOW_HALF_WIDTHS * zeta.abs() * f)
+                    .max(0.01 * f)
+                    .max(3.0 * line_spacing_near(data, f));
+                let (a, b) = lines_within(data, f - half, f + half);
+                (b > a).then(|| stats.t[a..b].iter().sum::<f64>() / (b - a) as f64)
+            })
+            .collect();
+        let typical = typical_mean(means.iter().flatten().copied().collect());
+        Self {
+            means,
+            typical,
+            quiet: floor_t(stats),
+        }
+    }
+
+    /// True when the residual around fitted mode `partner` stands out
+    /// ([`OVER_TYPICAL`], [`MIN_EXCESS`]).
+    fn stands_out(&self, partner: usize) -> bool {
+        let Some(Some(mine)) = self.means.get(partner).copied() else {
+            return false;
+        };
+        mine >= OVER_TYPICAL * self.typical && mine >= MIN_EXCESS * self.quiet
+    }
 }
 
 /// `model` (numerators fitted) with each added mode (indices `added`, each started at
@@ -241,7 +238,7 @@ pub fn with_local_pairs(
 ) -> Option<AdditiveModel> {
     let mut trial = model.clone();
     let mut used = Vec::new();
-    let means = neighbourhood_means(model, data, before, n_old);
+    let hoods = Neighbourhoods::new(model, data, before, n_old);
     for &i in added {
         let Some((f, _)) = resonance(&trial, i) else {
             continue;
@@ -249,7 +246,7 @@ pub fn with_local_pairs(
         let Some(old) = merged_partner(&trial, n_old, f) else {
             continue;
         };
-        if used.contains(&old) || !stands_out(&means, before, old) {
+        if used.contains(&old) || !hoods.stands_out(old) {
             continue;
         }
         if let Some((s_old, s_new)) = local_pair(&trial, data, old, i, riv) {

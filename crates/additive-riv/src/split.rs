@@ -207,14 +207,14 @@ fn coarse_config(riv: &RivConfig, cfg: &SplitConfig) -> RivConfig {
 }
 
 /// Natural frequency (Hz) and damping of submodel `i`, when it is a resonance.
-fn pole_of(model: &AdditiveModel, i: usize) -> Option<(f64, f64)> {
+pub(crate) fn pole_of(model: &AdditiveModel, i: usize) -> Option<(f64, f64)> {
     let p = model.upper_pole(&model.submodels[i])?;
     let f = p.norm() / TAU;
     (f.is_finite() && f > 0.0).then(|| (f, -p.re / p.norm()))
 }
 
 /// The line range `[a, b)` of `data` within `lo_hz..=hi_hz`.
-fn lines_within(data: &FitData, lo_hz: f64, hi_hz: f64) -> (usize, usize) {
+pub(crate) fn lines_within(data: &FitData, lo_hz: f64, hi_hz: f64) -> (usize, usize) {
     let a = data.omega.partition_point(|&w| w < TAU * lo_hz);
     let b = data.omega.partition_point(|&w| w <= TAU * hi_hz);
     (a, b.max(a))
@@ -225,10 +225,22 @@ fn energy(stats: &ResidualStats, a: usize, b: usize) -> f64 {
     stats.t[a..b].iter().sum::<f64>() * stats.s2 / 2.0
 }
 
+/// The typical neighbourhood among the modes' mean statistics `means`: their lower
+/// median (a model of two modes, one of them merged, has the other as its typical
+/// neighbourhood); 0 with fewer than two modes.
+pub(crate) fn typical_mean(mut means: Vec<f64>) -> f64 {
+    means.sort_by(|x, y| x.total_cmp(y));
+    if means.len() >= 2 {
+        means[(means.len() - 1) / 2]
+    } else {
+        0.0
+    }
+}
+
 /// The reference level of the per-line statistic: its lower quintile over the band. A
 /// model that misfits much of the band (a mode's tail reshaping its neighbours) raises
 /// the median too; the lines it fits at the noise level still set the lower quintile.
-fn floor_t(stats: &ResidualStats) -> f64 {
+pub(crate) fn floor_t(stats: &ResidualStats) -> f64 {
     let mut s = stats.t.clone();
     s.sort_by(|a, b| a.total_cmp(b));
     s[s.len() / 5]
@@ -362,15 +374,7 @@ pub fn split_close_pairs(
         // a misfit that raises every mode's neighbourhood alike (a delay, a lag, a
         // hold) is broadband, not a merged pair: a candidate must stand out from the
         // typical neighbourhood as well as from the band's quiet lines
-        let mut means: Vec<f64> = cands.iter().map(|c| c.4).collect();
-        means.sort_by(|x, y| x.total_cmp(y));
-        // the lower median (a model of two modes, one of them merged, has the other as
-        // its typical neighbourhood); none with a single mode
-        let typical = if means.len() >= 2 {
-            means[(means.len() - 1) / 2]
-        } else {
-            0.0
-        };
+        let typical = typical_mean(cands.iter().map(|c| c.4).collect());
         cands.retain(|c| c.4 >= cfg.min_excess * med && c.4 >= cfg.over_typical * typical);
         if cands.is_empty() || n_tried >= cfg.max_trials {
             break;
