@@ -390,52 +390,68 @@ impl Basis {
                 Some(out)
             })
             .collect();
-        for (k, &w) in omega.iter().enumerate() {
-            let f0 = model.factor.at(w);
-            let f0_inv = f0.inv();
-            // the discrete variable is the same for every submodel: one sincos per line
-            let z = match model.domain() {
-                crate::Domain::ZohDiscrete { ts } => Some(C64::from_polar(1.0, -w * ts)),
-                crate::Domain::Continuous => None,
-            };
-            for (i, s) in model.submodels.iter().enumerate() {
-                let x = z.unwrap_or_else(|| model.variable(s, w));
-                let a = s.den_at(x);
-                let mut pa = s.num_poly_at(x) / (model.integrator_factor(s.integrators, x) * a);
-                if s.bypass_factor {
-                    // the divided problem sees this submodel divided by the known factor
-                    pa *= f0_inv;
-                }
-                let mut xr = x.powi(s.num_start as i32);
-                for t in 0..s.num.len() {
-                    let v = xr * pa;
-                    let j = lay.num_offset[i] + t;
-                    u_re[j * n + k] = v.re;
-                    u_im[j * n + k] = v.im;
-                    xr *= x;
-                }
-                let ia = a.inv();
-                let mut xr = x;
-                for t in 0..s.den.len() {
-                    let v = -xr * ia;
-                    let d = lay.den_offset[i] + t;
-                    d_re[d * n + k] = v.re;
-                    d_im[d * n + k] = v.im;
-                    // d u_j / d a_t = -x^t u_j / A (+ the shape's own derivative)
-                    for p in pair_range[d].clone() {
-                        let j = pairs[p].1;
-                        let uj = C64::new(u_re[j * n + k], u_im[j * n + k]);
-                        let mut du = v * uj;
-                        if let Some(ds) = &dshape[i] {
-                            let dc = C64::new(ds[t][0], 0.0) * x + C64::new(ds[t][1], 0.0) * x * x;
-                            du += dc / (model.integrator_factor(s.integrators, x) * a);
-                        }
-                        du_re[p * n + k] = du.re;
-                        du_im[p * n + k] = du.im;
-                    }
-                    xr *= x;
-                }
+        // per line: the known factor and (with the exact hold) the discrete variable,
+        // the same for every submodel (one sincos per line)
+        let f0: Vec<C64> = omega.iter().map(|&w| model.factor.at(w)).collect();
+        let f0_inv: Vec<C64> = f0.iter().map(|v| v.inv()).collect();
+        let z: Option<Vec<C64>> = match model.domain() {
+            crate::Domain::ZohDiscrete { ts } => Some(
+                omega
+                    .iter()
+                    .map(|&w| C64::from_polar(1.0, -w * ts))
+                    .collect(),
+            ),
+            crate::Domain::Continuous => None,
+        };
+        // each submodel fills its own consecutive columns of u, d and du
+        let mut cols: Vec<SubmodelColumns<'_>> = Vec::with_capacity(model.submodels.len());
+        {
+            let (mut ur, mut ui) = (&mut u_re[..], &mut u_im[..]);
+            let (mut dr, mut di) = (&mut d_re[..], &mut d_im[..]);
+            let (mut pr, mut pi) = (&mut du_re[..], &mut du_im[..]);
+            for s in &model.submodels {
+                let (nu_s, nd_s) = (s.num.len() * n, s.den.len() * n);
+                let np_s = s.num.len() * s.den.len() * n;
+                let (a, rest) = ur.split_at_mut(nu_s);
+                ur = rest;
+                let (b, rest) = ui.split_at_mut(nu_s);
+                ui = rest;
+                let (c, rest) = dr.split_at_mut(nd_s);
+                dr = rest;
+                let (d, rest) = di.split_at_mut(nd_s);
+                di = rest;
+                let (e, rest) = pr.split_at_mut(np_s);
+                pr = rest;
+                let (f, rest) = pi.split_at_mut(np_s);
+                pi = rest;
+                cols.push(SubmodelColumns {
+                    u_re: a,
+                    u_im: b,
+                    d_re: c,
+                    d_im: d,
+                    du_re: e,
+                    du_im: f,
+                });
             }
+        }
+        let fill = |(i, c): (usize, SubmodelColumns<'_>)| {
+            fill_submodel(
+                model,
+                i,
+                omega,
+                z.as_deref(),
+                &f0_inv,
+                dshape[i].as_ref(),
+                c,
+            )
+        };
+        if n * model.submodels.len() >= PARALLEL_BASIS_WORK && model.submodels.len() > 1 {
+            cols.into_par_iter().enumerate().for_each(fill);
+        } else {
+            cols.into_iter().enumerate().for_each(fill);
+        }
+        for (k, &w) in omega.iter().enumerate() {
+            let f0 = f0[k];
             for e in 0..f_rows {
                 f[e * n + k] = f0;
             }
@@ -532,6 +548,77 @@ impl Basis {
     #[inline]
     pub fn u(&self, j: usize, k: usize) -> C64 {
         C64::new(self.u_re[j * self.n + k], self.u_im[j * self.n + k])
+    }
+}
+
+/// Line-submodels (`lines x submodels`) from which [`Basis::new`] fills the submodels'
+/// columns on the rayon pool: the wafer stage (3960 lines, 19 submodels, 7.5e4) is
+/// above it, a SISO fit of a few hundred lines and modes below.
+const PARALLEL_BASIS_WORK: usize = 20_000;
+
+/// One submodel's columns of a [`Basis`] (`[t * n + k]` within each slice).
+struct SubmodelColumns<'a> {
+    u_re: &'a mut [f64],
+    u_im: &'a mut [f64],
+    d_re: &'a mut [f64],
+    d_im: &'a mut [f64],
+    du_re: &'a mut [f64],
+    du_im: &'a mut [f64],
+}
+
+/// Fills submodel `i`'s numerator columns `u_t = x^(s+t) pi(x) / (x^l A(x))`, its
+/// denominator columns `-x^t / A(x)` and the derivatives `d u_j / d a_t` (eq. 11-12 of the
+/// wafer-stage paper) at every line. `z` is the discrete variable per line with the exact
+/// hold (else the submodel's scaled `j w`), `f0_inv` the inverse known factor per line
+/// (for a submodel that bypasses it), `dshape` the exact-hold shape's derivative.
+fn fill_submodel(
+    model: &AdditiveModel,
+    i: usize,
+    omega: &[f64],
+    z: Option<&[C64]>,
+    f0_inv: &[C64],
+    dshape: Option<&[[f64; 2]; 2]>,
+    c: SubmodelColumns<'_>,
+) {
+    let n = omega.len();
+    let s = &model.submodels[i];
+    let (nnum, nden) = (s.num.len(), s.den.len());
+    for (k, &w) in omega.iter().enumerate() {
+        let x = z.map_or_else(|| model.variable(s, w), |z| z[k]);
+        let a = s.den_at(x);
+        let pi_a = model.integrator_factor(s.integrators, x) * a;
+        let mut pa = s.num_poly_at(x) / pi_a;
+        if s.bypass_factor {
+            // the divided problem sees this submodel divided by the known factor
+            pa *= f0_inv[k];
+        }
+        let mut xr = x.powi(s.num_start as i32);
+        for t in 0..nnum {
+            let v = xr * pa;
+            c.u_re[t * n + k] = v.re;
+            c.u_im[t * n + k] = v.im;
+            xr *= x;
+        }
+        let ia = a.inv();
+        let mut xr = x;
+        for t in 0..nden {
+            let v = -xr * ia;
+            c.d_re[t * n + k] = v.re;
+            c.d_im[t * n + k] = v.im;
+            // d u_j / d a_t = -x^t u_j / A (+ the shape's own derivative)
+            for j in 0..nnum {
+                let uj = C64::new(c.u_re[j * n + k], c.u_im[j * n + k]);
+                let mut du = v * uj;
+                if let Some(ds) = dshape {
+                    let dc = C64::new(ds[t][0], 0.0) * x + C64::new(ds[t][1], 0.0) * x * x;
+                    du += dc / pi_a;
+                }
+                let p = t * nnum + j;
+                c.du_re[p * n + k] = du.re;
+                c.du_im[p * n + k] = du.im;
+            }
+            xr *= x;
+        }
     }
 }
 
@@ -700,17 +787,29 @@ pub fn cost(
             })
             .sum(),
         Some(r) => {
+            // per entry on the rayon pool: its cost and its residual over the lines;
+            // then summed in entry order (the same total as one thread would give)
+            let per_entry: Vec<(f64, Vec<C64>)> = (0..m)
+                .into_par_iter()
+                .map_init(EntryLines::default, |el, e| {
+                    el.fill(e, data, basis, groups, &eta[e * nn..(e + 1) * nn]);
+                    let f = &basis.f[basis.f_offset(e)..basis.f_offset(e) + n];
+                    // E of the undivided problem: F (y - P)
+                    let col = f
+                        .iter()
+                        .zip(el.e_re.iter().zip(&el.e_im))
+                        .map(|(fk, (re, im))| fk * C64::new(*re, *im))
+                        .collect();
+                    (el.cost(), col)
+                })
+                .collect();
             r.clear();
             r.resize(n * m, C64::new(0.0, 0.0));
             let mut total = 0.0;
-            let mut el = EntryLines::default();
-            for e in 0..m {
-                el.fill(e, data, basis, groups, &eta[e * nn..(e + 1) * nn]);
-                total += el.cost();
-                for k in 0..n {
-                    // E of the undivided problem: F (y - P)
-                    r[k * m + e] =
-                        basis.f[basis.f_offset(e) + k] * C64::new(el.e_re[k], el.e_im[k]);
+            for (e, (c, col)) in per_entry.iter().enumerate() {
+                total += c;
+                for (k, v) in col.iter().enumerate() {
+                    r[k * m + e] = *v;
                 }
             }
             total

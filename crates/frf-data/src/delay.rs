@@ -133,10 +133,10 @@ const COARSE_RESYNC: usize = 64;
 pub const MIN_DELAY_LINES: usize = 4;
 
 /// Lines x entries from which the robust refinement of [`estimate_delay`] evaluates its
-/// objective in blocks of lines on the rayon pool (a 50 x 50 FRF with 4000 lines has 1e7
-/// terms per evaluation and about 80 evaluations; the 4 x 13 wafer stage, 2e5, stays on
-/// one thread with the sequential sum).
-const PARALLEL_TERMS: usize = 1_000_000;
+/// objective in blocks of lines on the rayon pool (about 50 evaluations; the 4 x 13 wafer
+/// stage has 2e5 terms per evaluation, a 50 x 50 FRF with 4000 lines 1e7). Below it, one
+/// thread and the sequential sum: a few SISO or 2 x 2 FRFs of some hundred lines.
+const PARALLEL_TERMS: usize = 20_000;
 
 /// Lines per block of the parallel robust objective (see [`PARALLEL_TERMS`]).
 const PARALLEL_BLOCK_LINES: usize = 64;
@@ -155,8 +155,10 @@ pub fn estimate_delay(
     // Per-line statistic s_k.
     let mut w = Vec::with_capacity(n);
     let mut s = Vec::with_capacity(n);
-    // Per entry: the unit phasor g^2 / |g|^2 and its weight (normalised per line).
-    let mut q: Vec<Vec<(C64, f64)>> = Vec::with_capacity(n);
+    // Per entry: the unit phasor g^2 / |g|^2 and its weight (normalised per line), all
+    // lines one after the other (line `i` of `w` at `q_start[i]..q_start[i + 1]`), so
+    // that the robust objective streams three contiguous arrays
+    let mut q = UnitPhasors::with_capacity(n * m);
     let mut line = vec![C64::new(0.0, 0.0); m];
     let mut var = vec![0.0; m];
     let use_var = cfg.use_variance && data.has_variance();
@@ -171,7 +173,7 @@ pub fn estimate_delay(
         }
         let mut acc = C64::new(0.0, 0.0);
         let mut wsum = 0.0;
-        let mut qk = Vec::with_capacity(m);
+        let first = q.wt.len();
         for (e, g) in line.iter().enumerate() {
             let a = g.norm();
             if !(a.is_finite() && a > 0.0) {
@@ -185,15 +187,19 @@ pub fn estimate_delay(
             let ph = g * g / (a * a);
             acc += ph * wt;
             wsum += wt;
-            qk.push((ph, wt));
+            q.re.push(ph.re);
+            q.im.push(ph.im);
+            q.wt.push(wt);
         }
         if wsum > 0.0 && acc.re.is_finite() && acc.im.is_finite() {
             w.push(TAU * f);
             s.push(acc / wsum);
-            for x in qk.iter_mut() {
-                x.1 /= wsum;
+            for x in &mut q.wt[first..] {
+                *x /= wsum;
             }
-            q.push(qk);
+            q.start.push(q.wt.len());
+        } else {
+            q.truncate(first);
         }
     }
     if w.len() < MIN_DELAY_LINES {
@@ -334,42 +340,80 @@ pub fn estimate_delay(
     let p = cfg.robust_power;
     let mut std_s = None;
     if p > 0 {
-        // (sum_k t_k^2, R) over the lines `w`, `q` of one block
-        let block = |w: &[f64], q: &[Vec<(C64, f64)>], tau: f64| -> (f64, f64) {
+        // (sum_k t_k^2, R) over the lines `lines` of `w` and `q`; each line's terms go
+        // through small buffers in separate loops (rotation, power, sums), which the
+        // compiler vectorises, instead of one loop per term with a branch and a power
+        let block = |lines: std::ops::Range<usize>, tau: f64| -> (f64, f64) {
+            let widest = lines
+                .clone()
+                .map(|k| q.start[k + 1] - q.start[k])
+                .max()
+                .unwrap_or(0);
+            let (mut z_re, mut z_im) = (vec![0.0; widest], vec![0.0; widest]);
+            let (mut x, mut pm1) = (vec![0.0; widest], vec![0.0; widest]);
             let mut acc = 0.0;
             let mut sum_t2 = 0.0;
-            for (wk, qk) in w.iter().zip(q) {
+            for k in lines {
+                let wk = w[k];
                 let rot = C64::from_polar(sign, 2.0 * wk * tau);
-                let mut t = 0.0;
-                for &(ph, wt) in qk {
-                    let z = ph * rot;
-                    if z.re > 0.0 {
-                        let pm1 = z.re.powi(p as i32 - 1);
-                        acc += wt * pm1 * z.re;
-                        // d/dtau of x^p = p x^(p-1) * (-2 w Im z)
-                        t += wt * p as f64 * pm1 * (-2.0 * wk * z.im);
+                let span = q.start[k]..q.start[k + 1];
+                let len = span.len();
+                let (re, im, wt) = (&q.re[span.clone()], &q.im[span.clone()], &q.wt[span]);
+                // z = ph * rot; only Re z > 0 pulls (psi(x) = max(x, 0)^p)
+                for i in 0..len {
+                    z_re[i] = re[i] * rot.re - im[i] * rot.im;
+                    z_im[i] = re[i] * rot.im + im[i] * rot.re;
+                    x[i] = z_re[i].max(0.0);
+                    pm1[i] = 1.0;
+                }
+                // pm1 = x^(p - 1) by repeated squaring over the whole line
+                let mut e = p - 1;
+                while e > 0 {
+                    if e & 1 == 1 {
+                        for (a, b) in pm1[..len].iter_mut().zip(&x[..len]) {
+                            *a *= b;
+                        }
+                    }
+                    e >>= 1;
+                    if e > 0 {
+                        for v in &mut x[..len] {
+                            *v *= *v;
+                        }
                     }
                 }
+                // R += sum wt x^p; d/dtau of x^p = p x^(p-1) * (-2 w Im z), summed
+                // in four lanes
+                let (mut a4, mut t4) = ([0.0; 4], [0.0; 4]);
+                for i in 0..len {
+                    let on = if z_re[i] > 0.0 { wt[i] * pm1[i] } else { 0.0 };
+                    a4[i % 4] += on * z_re[i];
+                    t4[i % 4] += on * z_im[i];
+                }
+                acc += (a4[0] + a4[1]) + (a4[2] + a4[3]);
+                let t = ((t4[0] + t4[1]) + (t4[2] + t4[3])) * (p as f64 * -2.0 * wk);
                 sum_t2 += t * t;
             }
             (sum_t2, acc)
         };
-        let terms: usize = q.iter().map(Vec::len).sum();
+        let terms = q.wt.len();
+        let n_lines = w.len();
         let robust = |tau: f64, out: Option<&mut (f64, f64)>| -> f64 {
             let (sum_t2, acc) = if terms >= PARALLEL_TERMS {
                 // blocks of lines on the rayon pool, summed in their order (the same
                 // result on every run)
                 use rayon::prelude::*;
-                let parts: Vec<(f64, f64)> = w
-                    .par_chunks(PARALLEL_BLOCK_LINES)
-                    .zip(q.par_chunks(PARALLEL_BLOCK_LINES))
-                    .map(|(wb, qb)| block(wb, qb, tau))
+                let parts: Vec<(f64, f64)> = (0..n_lines.div_ceil(PARALLEL_BLOCK_LINES))
+                    .into_par_iter()
+                    .map(|b| {
+                        let k0 = b * PARALLEL_BLOCK_LINES;
+                        block(k0..(k0 + PARALLEL_BLOCK_LINES).min(n_lines), tau)
+                    })
                     .collect();
                 parts
                     .iter()
                     .fold((0.0, 0.0), |(a, b), (c, d)| (a + c, b + d))
             } else {
-                block(&w, &q, tau)
+                block(0..n_lines, tau)
             };
             if let Some(o) = out {
                 *o = (sum_t2, acc);
@@ -451,6 +495,34 @@ pub fn estimate_delay(
         resolution_s: resolution,
         n_lines: w.len(),
     })
+}
+
+/// The unit phasors `g^2 / |g|^2` of every usable entry of every usable line, with
+/// their weights, stored line after line in three contiguous arrays.
+struct UnitPhasors {
+    re: Vec<f64>,
+    im: Vec<f64>,
+    wt: Vec<f64>,
+    /// Line `i`'s entries are at `start[i]..start[i + 1]`.
+    start: Vec<usize>,
+}
+
+impl UnitPhasors {
+    fn with_capacity(terms: usize) -> Self {
+        Self {
+            re: Vec::with_capacity(terms),
+            im: Vec::with_capacity(terms),
+            wt: Vec::with_capacity(terms),
+            start: vec![0],
+        }
+    }
+
+    /// Drops the entries from `len` on (a line that turned out unusable).
+    fn truncate(&mut self, len: usize) {
+        self.re.truncate(len);
+        self.im.truncate(len);
+        self.wt.truncate(len);
+    }
 }
 
 /// `data` with the delay `tau_s` removed: every line multiplied by `exp(+j w tau_s)`.

@@ -128,8 +128,12 @@ fn per_entry_floor(n: usize, m: usize, value: impl Fn(usize) -> f64, rel: f64) -
     for (e, fl) in floors.iter_mut().enumerate() {
         col.clear();
         col.extend((0..n).map(|k| value(k * m + e)));
-        col.sort_by(|a, b| a.total_cmp(b));
-        let med = if n == 0 { 0.0 } else { col[n / 2] };
+        // the (n/2)-th smallest in the total order, without sorting the rest
+        let med = if n == 0 {
+            0.0
+        } else {
+            *col.select_nth_unstable_by(n / 2, |a, b| a.total_cmp(b)).1
+        };
         *fl = rel * med;
     }
     floors
