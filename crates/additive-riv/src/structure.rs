@@ -341,8 +341,14 @@ pub(crate) fn significant_off_peak(
     Ok(fs >= f_critical_eff(p as f64, alpha).max(min_f))
 }
 
-/// Removed (submodel index, frequency, reason) and per-submodel (frequency, F statistic).
-type DropOutcome = (Vec<(usize, f64, String)>, Vec<(f64, f64)>);
+/// Removed (submodel index, frequency, reason), per-submodel (frequency, F statistic),
+/// and, when nothing was removed, the residual statistics of the model as returned (the
+/// caller's next residual test reuses them instead of computing them again).
+type DropOutcome = (
+    Vec<(usize, f64, String)>,
+    Vec<(f64, f64)>,
+    Option<ResidualStats>,
+);
 
 /// Removes unstable, overdamped, out-of-band, unresolved (a half-power bandwidth below
 /// the line spacing and not significant off its own lines, [`significant_off_peak`]) and
@@ -462,7 +468,9 @@ fn drop_pass(
     if !out.is_empty() {
         fit_numerators(model, data)?;
     }
-    Ok((out, stats))
+    // nothing removed: `trial` is the model as returned
+    let unchanged = out.is_empty().then_some(rstats);
+    Ok((out, stats, unchanged))
 }
 
 /// Removes unstable, overdamped, out-of-band, unresolved, duplicated and insignificant
@@ -473,7 +481,7 @@ pub fn prune_modes(
     data: &FitData,
     cfg: &AdaptConfig,
 ) -> Result<Vec<(f64, String)>, RivError> {
-    let (removed, _) = drop_pass(model, data, cfg, &[])?;
+    let (removed, _, _) = drop_pass(model, data, cfg, &[])?;
     Ok(removed.into_iter().map(|(_, f, why)| (f, why)).collect())
 }
 
@@ -505,7 +513,7 @@ pub fn adapt_modes(
         let previous_cost = model_cost(&previous.model, data);
         let mut model = fit.model.clone();
         // 1. remove what does not belong
-        let (dropped, _) = drop_pass(&mut model, data, cfg, &[])?;
+        let (dropped, _, kept_stats) = drop_pass(&mut model, data, cfg, &[])?;
         let mut changed = !dropped.is_empty();
         report
             .dropped
@@ -515,9 +523,14 @@ pub fn adapt_modes(
         let (lo, hi) = data.band_hz;
         // an exact fit's residual is round-off: its peaks are no modes, whatever their
         // F statistic against it (see `EXACT_FIT_REL`)
-        let exact = model_cost(&model, data) <= EXACT_FIT_REL * data.weighted_energy();
+        let cost_now = if dropped.is_empty() {
+            previous_cost
+        } else {
+            model_cost(&model, data)
+        };
+        let exact = cost_now <= EXACT_FIT_REL * data.weighted_energy();
         let first_order = model_first_order(&model);
-        let stats = ResidualStats::new(&model, data);
+        let stats = kept_stats.unwrap_or_else(|| ResidualStats::new(&model, data));
         let mut peak_at = Vec::new();
         for &(f, _) in residual_peaks_over(
             &stats,
@@ -611,7 +624,7 @@ pub fn adapt_modes(
                     .extend(local_reject.iter().map(|(_, f, why)| (*f, why.clone())));
             }
             let protect: Vec<usize> = (0..n_old).collect();
-            let (dropped_new, stats) = drop_pass(&mut model, data, cfg, &protect)?;
+            let (dropped_new, stats, _) = drop_pass(&mut model, data, cfg, &protect)?;
             for &i in &kept_added {
                 let j = remap(i);
                 if !dropped_new.iter().any(|d| d.0 == j) {
