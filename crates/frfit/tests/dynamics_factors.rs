@@ -232,3 +232,46 @@ fn an_actuator_lag_lead_keeps_its_zero_above_the_band() {
     );
     ends_noise_limited_near_truth(&out, &clean, &[]);
 }
+
+/// A first-order lag at 700 Hz on input 4 of another plate (seed 29, the simulator's
+/// defaults: lines 0.25 Hz apart, 10 periods x 10 realizations), band 20..2000 Hz as
+/// `frfit diagnose --band 20:2000` runs it. The first fit takes the lag for a mode that
+/// lives in input 4 alone, so the round refits both a first-order factor and a
+/// second-order one in the mode's place; the second-order refit splits its poles into
+/// 700 Hz and tens of MHz, where the band cannot see a pole
+/// (`trial::test_far_poles`). The summary must say what the plant has: one first-order
+/// `input_dynamics` on input 4 with its corner within 0.1 % of 700 Hz, no pole beyond
+/// the band, and the model within 1e-4 of the noiseless response.
+#[test]
+fn an_actuator_lag_is_first_order_even_where_a_second_order_fits_as_well() {
+    let f_c = 700.0;
+    let (data, clean, _) = common::simulate(&common::Sim {
+        seed: 29,
+        plant_dynamics: vec![DynamicsFactor::first_order(FactorTarget::Input(3), f_c)],
+        ..common::Sim::default()
+    });
+    let cfg = frfit::pipeline::PipelineConfig {
+        band_hz: Some((20.0, 2000.0)),
+        diagnose: true,
+        ..Default::default()
+    };
+    let t = std::time::Instant::now();
+    let out = frfit::pipeline::run(&data, "lag on input 4, plate 29", &cfg, "diagnose").unwrap();
+    common::print_steps("lag on input 4, plate 29", &out);
+    println!("  diagnosis took {:.1} s", t.elapsed().as_secs_f64());
+    let steps = common::accepted(&out, "input_dynamics");
+    assert_eq!(steps.len(), 1, "one input_dynamics step");
+    let p = &steps[0].params;
+    println!("evidence: {}", steps[0].evidence);
+    assert_eq!(p["support"], "inputs");
+    assert_eq!(p["inputs"][0], 4, "the factor is on input 4");
+    assert_eq!(p["order"], 1, "a first-order factor");
+    let poles = p["poles"].as_array().unwrap();
+    assert_eq!(poles.len(), 1, "one pole: {poles:?}");
+    let pole = poles[0]["f_hz"].as_f64().unwrap();
+    assert!(
+        (pole / f_c - 1.0).abs() < 1e-3,
+        "lag at {pole:.3} Hz, made at {f_c}"
+    );
+    ends_noise_limited_near_truth(&out, &clean, &["delay", "feedthrough", "output_dynamics"]);
+}

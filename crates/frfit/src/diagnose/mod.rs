@@ -473,6 +473,8 @@ fn round(
     }
     // a factor's zeros must be significant beside the same factor without them
     trial::test_zeros(&mut trials, fd, cfg, &current);
+    // a second-order factor with a pole far beyond the band is the first-order one
+    trial::test_far_poles(&mut trials, fd);
     // a low mode beside the free body and a suspended body: the body's parameters decide
     trial::mode_or_suspension(&mut trials, fd, cfg);
     st.n_tests = n_tests.into_inner();

@@ -709,6 +709,72 @@ pub fn test_zeros(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConfig, curr
     }
 }
 
+/// How far above the band's top line a pole of a refitted factor may lie before the
+/// band cannot tell it from none: at 100 times the top line its phase there is below
+/// 0.6 degrees and its magnitude change below 5e-5, what a delay of a few nanoseconds
+/// or the noise explains.
+pub const FAR_POLE_OVER_TOP: f64 = 100.0;
+
+/// A second-order all-pole factor whose refit split its poles into one real pole the band
+/// shows and one beyond [`FAR_POLE_OVER_TOP`] times the top line is a first-order factor
+/// with a second pole the data cannot see (on a simulated stage with a 700 Hz lag on one
+/// input, seed 29: poles at 700.002 Hz and 83 MHz). When the first-order factor on the
+/// same support passes as well, that reading is the one reported: the second-order trial
+/// is held back, and the round's best passing trial is the first-order factor (the
+/// two ended 1.7e-4 apart in cost on that stage, the same response to 1e-7).
+pub fn test_far_poles(trials: &mut [Trial], fd: &FitData) {
+    let f_far = FAR_POLE_OVER_TOP * fd.band_hz.1;
+    // (effect, support) of the passing first-order all-pole factors
+    let first_order: Vec<(validation::residual::Effect, String)> = trials
+        .iter()
+        .filter(|t| t.passes())
+        .filter_map(|t| {
+            let c = t.candidate.as_ref()?;
+            let start = c.factor_start()?;
+            (start.order == 1 && start.zeros.is_none()).then(|| (c.effect(), support_of(&c.key())))
+        })
+        .collect();
+    for t in trials.iter_mut() {
+        if !t.passes() {
+            continue;
+        }
+        let Some(c) = &t.candidate else { continue };
+        let Some(start) = c.factor_start() else {
+            continue;
+        };
+        if start.order != 2 || start.zeros.is_some() {
+            continue;
+        }
+        let support = support_of(&c.key());
+        if !first_order
+            .iter()
+            .any(|(e, s)| *e == c.effect() && *s == support)
+        {
+            continue;
+        }
+        let Some(poles) = t.model.dynamics.last().map(|d| d.poles()) else {
+            continue;
+        };
+        let hz = |p: &frf_data::C64| p.norm() / std::f64::consts::TAU;
+        let far = poles.iter().filter(|p| hz(p) > f_far).count();
+        let real = poles.iter().all(|p| p.im.abs() <= 1e-9 * p.norm());
+        if poles.len() == 2 && real && far == 1 {
+            let f_far_pole = poles.iter().map(hz).fold(0.0, f64::max);
+            t.hold_back(&format!(
+                "its refit put one of its two real poles at {f_far_pole:.3e} Hz, beyond \
+                 {FAR_POLE_OVER_TOP} times the top line, where the band cannot see it: the \
+                 first-order factor on the same support, which passes too, is the reading"
+            ));
+        }
+    }
+}
+
+/// The support part of a dynamics factor candidate's key (`3` for input or output 4,
+/// `all` for a common factor), see [`super::Candidate::key`].
+fn support_of(key: &str) -> String {
+    key.split(':').next().unwrap_or_default().to_string()
+}
+
 /// A low mode beside the free rigid body or a suspended body: for a round that refitted
 /// both readings of the residual's suspension signature (the `stiffness` and the
 /// `missed_mode` proposed beside the free body, [`super::candidate::propose`]) and both
