@@ -412,25 +412,13 @@ impl Basis {
             for s in &model.submodels {
                 let (nu_s, nd_s) = (s.num.len() * n, s.den.len() * n);
                 let np_s = s.num.len() * s.den.len() * n;
-                let (a, rest) = ur.split_at_mut(nu_s);
-                ur = rest;
-                let (b, rest) = ui.split_at_mut(nu_s);
-                ui = rest;
-                let (c, rest) = dr.split_at_mut(nd_s);
-                dr = rest;
-                let (d, rest) = di.split_at_mut(nd_s);
-                di = rest;
-                let (e, rest) = pr.split_at_mut(np_s);
-                pr = rest;
-                let (f, rest) = pi.split_at_mut(np_s);
-                pi = rest;
                 cols.push(SubmodelColumns {
-                    u_re: a,
-                    u_im: b,
-                    d_re: c,
-                    d_im: d,
-                    du_re: e,
-                    du_im: f,
+                    u_re: take_front(&mut ur, nu_s),
+                    u_im: take_front(&mut ui, nu_s),
+                    d_re: take_front(&mut dr, nd_s),
+                    d_im: take_front(&mut di, nd_s),
+                    du_re: take_front(&mut pr, np_s),
+                    du_im: take_front(&mut pi, np_s),
                 });
             }
         }
@@ -555,6 +543,13 @@ impl Basis {
 /// columns on the rayon pool: the wafer stage (3960 lines, 19 submodels, 7.5e4) is
 /// above it, a SISO fit of a few hundred lines and modes below.
 const PARALLEL_BASIS_WORK: usize = 20_000;
+
+/// The first `len` values of `rest`, which keeps the others.
+fn take_front<'a>(rest: &mut &'a mut [f64], len: usize) -> &'a mut [f64] {
+    let (front, back) = std::mem::take(rest).split_at_mut(len);
+    *rest = back;
+    front
+}
 
 /// One submodel's columns of a [`Basis`] (`[t * n + k]` within each slice).
 struct SubmodelColumns<'a> {

@@ -5,21 +5,16 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use frf_data::cmif::{cmif_with, pick_peaks, PeakConfig, SvdMethod};
-use frf_data::shared_data::{shared_file, skip_message};
+use frf_data::shared_data;
 use frf_data::FrfDataset;
 use std::hint::black_box;
 
 fn cmif(c: &mut Criterion) {
     faer::set_global_parallelism(faer::Par::Seq);
-    let Some(path) = shared_file("wafer_nominal.csv") else {
-        println!("{}", skip_message("bench cmif", "wafer_nominal.csv"));
+    let Some(band) = shared_data::require_band("bench cmif", "wafer_nominal.csv", (20.0, 2000.0))
+    else {
         return;
     };
-    let data = frf_data::io::read_frf(&path).expect("the reference CSV reads");
-    let band = data
-        .band(20.0, 2000.0)
-        .expect("the band holds lines")
-        .to_frf();
     let mut g = c.benchmark_group("cmif");
     g.sample_size(20);
     for (name, method) in [("jacobi", SvdMethod::Jacobi), ("faer", SvdMethod::Faer)] {

@@ -6,20 +6,15 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use frf_data::delay::{estimate_delay, DelayConfig};
-use frf_data::shared_data::{shared_file, skip_message};
+use frf_data::shared_data;
 use frf_data::FrfDataset;
 use std::hint::black_box;
 
 fn delay(c: &mut Criterion) {
-    let Some(path) = shared_file("wafer_nominal.csv") else {
-        println!("{}", skip_message("bench delay", "wafer_nominal.csv"));
+    let Some(band) = shared_data::require_band("bench delay", "wafer_nominal.csv", (20.0, 2000.0))
+    else {
         return;
     };
-    let data = frf_data::io::read_frf(&path).expect("the reference CSV reads");
-    let band = data
-        .band(20.0, 2000.0)
-        .expect("the band holds lines")
-        .to_frf();
     let mut g = c.benchmark_group("delay");
     g.sample_size(20);
     let n = band.n_lines();
