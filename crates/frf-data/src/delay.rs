@@ -156,7 +156,7 @@ pub fn estimate_delay(
     let mut w = Vec::with_capacity(n);
     let mut s = Vec::with_capacity(n);
     // Per entry: the unit phasor g^2 / |g|^2 and its weight (normalised per line), all
-    // lines one after the other (line `i` of `w` at `q_start[i]..q_start[i + 1]`), so
+    // lines one after the other (line `i` of `w` at `q.start[i]..q.start[i + 1]`), so
     // that the robust objective streams three contiguous arrays
     let mut q = UnitPhasors::with_capacity(n * m);
     let mut line = vec![C64::new(0.0, 0.0); m];

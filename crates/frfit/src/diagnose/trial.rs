@@ -720,8 +720,9 @@ pub const FAR_POLE_OVER_TOP: f64 = 100.0;
 /// with a second pole the data cannot see (on a simulated stage with a 700 Hz lag on one
 /// input, seed 29: poles at 700.002 Hz and 83 MHz). When the first-order factor on the
 /// same support passes as well, that reading is the one reported: the second-order trial
-/// is held back, and the round's best passing trial is the first-order factor (the
-/// two ended 1.7e-4 apart in cost on that stage, the same response to 1e-7).
+/// is held back, and the round's best passing trial is the first-order factor (on that
+/// stage the two refits ended at residual/noise 1.05745 and 1.05736, median relative
+/// error against the data 5.834e-4 and 5.833e-4).
 pub fn test_far_poles(trials: &mut [Trial], fd: &FitData) {
     let f_far = FAR_POLE_OVER_TOP * fd.band_hz.1;
     // (effect, support) of the passing first-order all-pole factors
