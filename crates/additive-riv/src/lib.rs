@@ -24,6 +24,7 @@ pub mod chain;
 pub mod complete;
 pub mod error;
 pub mod fitter;
+pub mod gram;
 pub mod init;
 pub mod mode_scan;
 pub mod model;

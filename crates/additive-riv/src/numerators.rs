@@ -7,7 +7,7 @@ use crate::small::spd_solve;
 use crate::{AdditiveModel, RivError};
 use faer::linalg::matmul::matmul;
 use faer::linalg::solvers::{Solve, SolveLstsq};
-use faer::{Accum, Mat, Par, Side};
+use faer::{Accum, Mat, MatRef, Par, Side};
 use rayon::prelude::*;
 
 /// Fits every numerator of `model` to `data` with the denominators held fixed
@@ -49,6 +49,13 @@ pub fn fit_numerators(model: &mut AdditiveModel, data: &FitData) -> Result<f64, 
         }
     }
     drop(s2);
+    // the other entries: their Gram matrices from the shared products (crate::gram),
+    // their right-hand sides `U^T S_e^2 y_e` by one product for all of them
+    let rest: Vec<usize> = (0..m).filter(|&e| sols[e].is_none()).collect();
+    let fast = solve_entries_shared(data, &basis, &ng, nn, &rest);
+    for (&e, x) in rest.iter().zip(fast) {
+        sols[e] = x;
+    }
     let sols: Vec<Vec<f64>> = sols
         .into_par_iter()
         .enumerate()
@@ -80,6 +87,76 @@ fn check_sizes(nn: usize, n: usize) -> Result<(), RivError> {
         });
     }
     Ok(())
+}
+
+/// The numerators of the entries `entries` (eq. 24 for each entry alone) by their
+/// normal equations, with the Gram matrices of all of them from the products of the
+/// basis shared by all entries ([`crate::gram::numerator_grams`]) and the right-hand
+/// sides `U^T S_e^2 y_e` of all of them by one product; each system is solved by an
+/// equilibrated Cholesky. `None` for an entry whose system is ill-conditioned (> 1e10)
+/// or not positive definite: [`solve_entry`] then solves it by a QR of its regressor.
+fn solve_entries_shared(
+    data: &FitData,
+    basis: &Basis,
+    ng: &[(usize, usize)],
+    nn: usize,
+    entries: &[usize],
+) -> Vec<Option<Vec<f64>>> {
+    let n = data.n;
+    let ne = entries.len();
+    if ne == 0 {
+        return Vec::new();
+    }
+    // the divided data scaled twice, `s^2 y`, real parts in `t_re`, imaginary in `t_im`,
+    // and the squared scales, entry after entry
+    let zero = vec![0.0; nn];
+    let filled: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = entries
+        .par_iter()
+        .map_init(EntryLines::default, |el, &e| {
+            el.fill(e, data, basis, ng, &zero);
+            let s2: Vec<f64> = el.s.iter().map(|v| v * v).collect();
+            let tr: Vec<f64> = s2.iter().zip(&el.y_re).map(|(a, b)| a * b).collect();
+            let ti: Vec<f64> = s2.iter().zip(&el.y_im).map(|(a, b)| a * b).collect();
+            (s2, tr, ti)
+        })
+        .collect();
+    let mut s2 = Vec::with_capacity(ne * n);
+    let mut t_re = Mat::<f64>::zeros(n, ne);
+    let mut t_im = Mat::<f64>::zeros(n, ne);
+    for (c, (a, tr, ti)) in filled.into_iter().enumerate() {
+        s2.extend_from_slice(&a);
+        t_re.col_as_slice_mut(c).copy_from_slice(&tr);
+        t_im.col_as_slice_mut(c).copy_from_slice(&ti);
+    }
+    let grams = crate::gram::numerator_grams(basis, nn, &s2, ne, true);
+    let u_re = MatRef::from_column_major_slice(&basis.u_re[..nn * n], n, nn);
+    let u_im = MatRef::from_column_major_slice(&basis.u_im[..nn * n], n, nn);
+    let mut rhs = Mat::<f64>::zeros(nn, ne);
+    matmul(
+        rhs.as_mut(),
+        Accum::Replace,
+        u_re.transpose(),
+        t_re.as_ref(),
+        1.0,
+        Par::Seq,
+    );
+    matmul(
+        rhs.as_mut(),
+        Accum::Add,
+        u_im.transpose(),
+        t_im.as_ref(),
+        1.0,
+        Par::Seq,
+    );
+    (0..ne)
+        .into_par_iter()
+        .map(|c| {
+            let mut h = grams[c * nn * nn..(c + 1) * nn * nn].to_vec();
+            let mut x = rhs.col_as_slice(c).to_vec();
+            let cond = spd_solve(&mut h, nn, &mut x, 1)?;
+            (cond < 1e10 && x.iter().all(|v| v.is_finite())).then_some(x)
+        })
+        .collect()
 }
 
 /// The numerators of entry `e` (eq. 24 for that entry alone: the regressor (25) of

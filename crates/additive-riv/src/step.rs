@@ -65,11 +65,12 @@ pub struct StepUpdate {
     pub cond_numerator: f64,
 }
 
-/// Fills the real instrument `Y = [U | V_hat]` and regressor `X = [U | V | eps]` of
+/// Fills the real instrument `Y = [U | V_hat]` and the regressor's other columns
+/// `X' = [V | eps]` (the full regressor is `[U | V | eps]`: its `U` is `Y`'s) of
 /// entry `e` for the lines `lines = k0..k1` (rows `k - k0`: real parts of line `k`;
 /// rows `len + k - k0`: imaginary parts, `len = k1 - k0`; every row scaled by
 /// `s = sqrt(w) |F|`), column by column so that each loop runs over contiguous lines.
-/// `y` and `x` need at least `2 len` rows and `nn + ns` and `nn + ns + 1` columns; `el`
+/// `y` and `x` need at least `2 len` rows and `nn + ns` and `ns + 1` columns; `el`
 /// holds the entry's lines after [`EntryLines::fill`]. The step fills a block of lines
 /// at a time and accumulates `Y^T X` over the blocks, so that the blocks stay in cache.
 ///
@@ -175,7 +176,6 @@ fn fill_entry_kernel(
             cr[k] = ur[k] * s[k];
             ci[k] = ui[k] * s[k];
         }
-        x.col_as_slice_mut(j)[..2 * len].copy_from_slice(&y.col_as_slice(j)[..2 * len]);
     }
     // denominator columns: the instrument is d P_i / d a = sum_j B_j d u_j / d a (the
     // gradient (12)); the regressor (14) adds d * E (it uses E + P_i where the
@@ -200,7 +200,7 @@ fn fill_entry_kernel(
             }
             {
                 let (ir, ii) = y.col_as_slice(nn + d)[..2 * len].split_at(len);
-                let (cr, ci) = x.col_as_slice_mut(nn + d)[..2 * len].split_at_mut(len);
+                let (cr, ci) = x.col_as_slice_mut(d)[..2 * len].split_at_mut(len);
                 for k in 0..len {
                     let er = e_re[k] * s[k];
                     let ei = e_im[k] * s[k];
@@ -210,7 +210,7 @@ fn fill_entry_kernel(
             }
             if method == IvMethod::Sk {
                 y.col_as_slice_mut(nn + d)[..2 * len]
-                    .copy_from_slice(&x.col_as_slice(nn + d)[..2 * len]);
+                    .copy_from_slice(&x.col_as_slice(d)[..2 * len]);
             }
         }
     }
@@ -231,7 +231,7 @@ fn fill_entry_kernel(
         let dl = &basis.dlnf[q * n + k0..q * n + k1];
         let is_delay = lay.fit_delay && q == 0;
         {
-            let (cr, ci) = x.col_as_slice_mut(nn + nd + q)[..2 * len].split_at_mut(len);
+            let (cr, ci) = x.col_as_slice_mut(nd + q)[..2 * len].split_at_mut(len);
             for k in 0..len {
                 if on {
                     let (mut yr, mut yi) = (y_re[k], y_im[k]);
@@ -269,7 +269,7 @@ fn fill_entry_kernel(
             }
         }
     }
-    let (cr, ci) = x.col_as_slice_mut(nn + ns)[..2 * len].split_at_mut(len);
+    let (cr, ci) = x.col_as_slice_mut(ns)[..2 * len].split_at_mut(len);
     for k in 0..len {
         cr[k] = e_re[k] * s[k];
         ci[k] = e_im[k] * s[k];
@@ -345,13 +345,18 @@ fn step_structured(
     let ns = lay.n_shared();
     let ng = num_groups(subs, lay);
     let dg = den_groups(subs, lay);
-    let per_entry = |e: usize,
-                     bufs: &mut (Mat<f64>, Mat<f64>, Mat<f64>, EntryLines)|
-     -> Result<EntryParts, RivError> {
-        let (y, x, z, el) = bufs;
+    // the numerator blocks U^T S_e^2 U of all entries from the basis products they
+    // share (crate::gram); the rest of Y_e^T X_e per entry
+    let s2 = crate::gram::squared_scales(&data.sqrt_w, basis, m);
+    let grams = crate::gram::numerator_grams(basis, nn, &s2, m, parallel);
+    drop(s2);
+    type Bufs = (Mat<f64>, Mat<f64>, Mat<f64>, Mat<f64>, EntryLines);
+    let per_entry = |e: usize, bufs: &mut Bufs| -> Result<EntryParts, RivError> {
+        let (y, x, zr, zl, el) = bufs;
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        // Z = Y^T X : (nn + ns) x (nn + ns + 1), accumulated over blocks of lines
-        // that stay in cache
+        // Y^T X with Y = [U | V_hat], X = [U | X']: the left block column is U^T U
+        // (from `grams`) over V_hat^T U (`zl`), the right one Y^T X' (`zr`),
+        // accumulated over blocks of lines that stay in cache
         for (b, k0) in (0..n).step_by(LINE_BLOCK).enumerate() {
             let k1 = (k0 + LINE_BLOCK).min(n);
             let rows = 2 * (k1 - k0);
@@ -368,27 +373,31 @@ fn step_structured(
                 y,
                 x,
             );
+            let acc = if b == 0 { Accum::Replace } else { Accum::Add };
+            let yb = y.as_ref().subrows(0, rows);
             matmul(
-                z.as_mut(),
-                if b == 0 { Accum::Replace } else { Accum::Add },
-                y.as_ref().subrows(0, rows).transpose(),
+                zr.as_mut(),
+                acc,
+                yb.transpose(),
                 x.as_ref().subrows(0, rows),
                 1.0,
                 Par::Seq,
             );
+            matmul(
+                zl.as_mut(),
+                acc,
+                yb.subcols(nn, ns).transpose(),
+                yb.subcols(0, nn),
+                1.0,
+                Par::Seq,
+            );
         }
-        let mut h_nn = vec![0.0; nn * nn];
-        for j in 0..nn {
-            for i in 0..nn {
-                // symmetric: average the two triangles against rounding
-                h_nn[j * nn + i] = 0.5 * (z[(i, j)] + z[(j, i)]);
-            }
-        }
+        let mut h_nn = grams[e * nn * nn..(e + 1) * nn * nn].to_vec();
         // rhs: [H_ns | g_n]
         let mut rhs = vec![0.0; nn * (ns + 1)];
         for c in 0..=ns {
             for i in 0..nn {
-                rhs[c * nn + i] = z[(i, nn + c)];
+                rhs[c * nn + i] = zr[(i, c)];
             }
         }
         let cond =
@@ -408,17 +417,17 @@ fn step_structured(
         let mut r_vec = vec![0.0; ns];
         for c in 0..ns {
             for r in 0..ns {
-                let mut v = z[(nn + r, nn + c)];
+                let mut v = zr[(nn + r, c)];
                 for t in 0..nn {
-                    v -= z[(nn + r, t)] * rhs[c * nn + t];
+                    v -= zl[(r, t)] * rhs[c * nn + t];
                 }
                 s_mat[c * ns + r] = v;
             }
         }
         for r in 0..ns {
-            let mut v = z[(nn + r, nn + ns)];
+            let mut v = zr[(nn + r, ns)];
             for t in 0..nn {
-                v -= z[(nn + r, t)] * rhs[ns * nn + t];
+                v -= zl[(r, t)] * rhs[ns * nn + t];
             }
             r_vec[r] = v;
         }
@@ -432,11 +441,12 @@ fn step_structured(
             cond,
         })
     };
-    let init = || {
+    let init = || -> Bufs {
         (
             Mat::<f64>::zeros(2 * LINE_BLOCK.min(n), nn + ns),
-            Mat::<f64>::zeros(2 * LINE_BLOCK.min(n), nn + ns + 1),
-            Mat::<f64>::zeros(nn + ns, nn + ns + 1),
+            Mat::<f64>::zeros(2 * LINE_BLOCK.min(n), ns + 1),
+            Mat::<f64>::zeros(nn + ns, ns + 1),
+            Mat::<f64>::zeros(ns, nn),
             EntryLines::default(),
         )
     };
@@ -515,7 +525,7 @@ fn step_dense(
     let mut yf = Mat::<f64>::zeros(2 * n * m, ptot);
     let mut xf = Mat::<f64>::zeros(2 * n * m, ptot + 1);
     let mut y = Mat::<f64>::zeros(2 * n, nn + ns);
-    let mut x = Mat::<f64>::zeros(2 * n, nn + ns + 1);
+    let mut x = Mat::<f64>::zeros(2 * n, ns + 1);
     let mut el = EntryLines::default();
     for e in 0..m {
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
@@ -536,13 +546,13 @@ fn step_dense(
             let rr = e * 2 * n + row;
             for c in 0..ns {
                 yf[(rr, c)] = y[(row, nn + c)];
-                xf[(rr, c)] = x[(row, nn + c)];
+                xf[(rr, c)] = x[(row, c)];
             }
             for t in 0..nn {
                 yf[(rr, ns + e * nn + t)] = y[(row, t)];
-                xf[(rr, ns + e * nn + t)] = x[(row, t)];
+                xf[(rr, ns + e * nn + t)] = y[(row, t)];
             }
-            xf[(rr, ptot)] = x[(row, nn + ns)];
+            xf[(rr, ptot)] = x[(row, ns)];
         }
     }
     let mut z = Mat::<f64>::zeros(ptot, ptot + 1);

@@ -432,7 +432,7 @@ fn run_single(
         Ok((f2, r2)) => {
             let (model2, chain2, links2) = finish(f2, r2);
             let c2 = cost(&model2);
-            if c2 < c1 {
+            if c2 < c1 * (1.0 - additive_riv::fitter::RERUN_GAIN) {
                 notes.push(format!(
                     "the delay moved from {:.2} us (start) to {:.2} us in the refinement: fitted again from the start with it, the whole chain (cost {c1:.4e} -> {c2:.4e})",
                     start_delay * 1e6,
