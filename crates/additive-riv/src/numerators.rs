@@ -107,27 +107,25 @@ fn solve_entries_shared(
     if ne == 0 {
         return Vec::new();
     }
-    // the divided data scaled twice, `s^2 y`, real parts in `t_re`, imaginary in `t_im`,
-    // and the squared scales, entry after entry
+    // the squared scales `s^2` and the divided data scaled twice, `s^2 y` (real parts
+    // in `t_re`, imaginary in `t_im`), entry after entry
     let zero = vec![0.0; nn];
-    let filled: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = entries
-        .par_iter()
-        .map_init(EntryLines::default, |el, &e| {
+    let mut s2 = vec![0.0; ne * n];
+    let mut t_re = vec![0.0; ne * n];
+    let mut t_im = vec![0.0; ne * n];
+    s2.par_chunks_mut(n)
+        .zip(t_re.par_chunks_mut(n))
+        .zip(t_im.par_chunks_mut(n))
+        .zip(entries.par_iter())
+        .for_each_init(EntryLines::default, |el, (((a, tr), ti), &e)| {
             el.fill(e, data, basis, ng, &zero);
-            let s2: Vec<f64> = el.s.iter().map(|v| v * v).collect();
-            let tr: Vec<f64> = s2.iter().zip(&el.y_re).map(|(a, b)| a * b).collect();
-            let ti: Vec<f64> = s2.iter().zip(&el.y_im).map(|(a, b)| a * b).collect();
-            (s2, tr, ti)
-        })
-        .collect();
-    let mut s2 = Vec::with_capacity(ne * n);
-    let mut t_re = Mat::<f64>::zeros(n, ne);
-    let mut t_im = Mat::<f64>::zeros(n, ne);
-    for (c, (a, tr, ti)) in filled.into_iter().enumerate() {
-        s2.extend_from_slice(&a);
-        t_re.col_as_slice_mut(c).copy_from_slice(&tr);
-        t_im.col_as_slice_mut(c).copy_from_slice(&ti);
-    }
+            for k in 0..n {
+                let v = el.s[k] * el.s[k];
+                a[k] = v;
+                tr[k] = v * el.y_re[k];
+                ti[k] = v * el.y_im[k];
+            }
+        });
     let grams = crate::gram::numerator_grams(basis, nn, &s2, ne, true);
     let u_re = MatRef::from_column_major_slice(&basis.u_re[..nn * n], n, nn);
     let u_im = MatRef::from_column_major_slice(&basis.u_im[..nn * n], n, nn);
@@ -136,7 +134,7 @@ fn solve_entries_shared(
         rhs.as_mut(),
         Accum::Replace,
         u_re.transpose(),
-        t_re.as_ref(),
+        MatRef::from_column_major_slice(&t_re, n, ne),
         1.0,
         Par::Seq,
     );
@@ -144,7 +142,7 @@ fn solve_entries_shared(
         rhs.as_mut(),
         Accum::Add,
         u_im.transpose(),
-        t_im.as_ref(),
+        MatRef::from_column_major_slice(&t_im, n, ne),
         1.0,
         Par::Seq,
     );

@@ -72,7 +72,8 @@ pub struct StepUpdate {
 /// `s = sqrt(w) |F|`), column by column so that each loop runs over contiguous lines.
 /// `y` and `x` need at least `2 len` rows and `nn + ns` and `ns + 1` columns; `el`
 /// holds the entry's lines after [`EntryLines::fill`]. The step fills a block of lines
-/// at a time and accumulates `Y^T X` over the blocks, so that the blocks stay in cache.
+/// at a time and accumulates `Y^T X'` and `V_hat^T U` over the blocks, so that the
+/// blocks stay in cache (the `U^T U` block comes from [`crate::gram`]).
 ///
 /// The loops are compiled for the SIMD instruction set of the CPU at run time
 /// (`pulp` dispatch: AVX2 or AVX-512 where present, the baseline otherwise).
