@@ -3,8 +3,9 @@
 //! maximum-likelihood weighting when the data carry a variance.
 
 use crate::problem::{cost, groups, pack, unpack, Basis, FitData, Layout};
-use crate::step::{step, IvMethod, StepSolver};
+use crate::step::{chord_step, step_keeping, IvMethod, StepFactors, StepSolver};
 use crate::{AdditiveModel, RivError};
+use frf_data::C64;
 use frf_data::{Convergence, Estimator, Fit, FrfDataset, ModelStructure, ProgressSink, Weighting};
 use std::time::Instant;
 
@@ -34,6 +35,11 @@ pub struct RivConfig {
     pub backtracking: bool,
     /// Per-entry elimination or the dense reference solve. Default: structured.
     pub solver: StepSolver,
+    /// Near the fixed point, reuse the matrix of the last full step with the current
+    /// right-hand side (chord steps, [`crate::step::chord_step`]: the same fixed point
+    /// at a fraction of a full step's cost; see [`CHORD_MAX_DRIFT`] and the constants
+    /// after it for when). Structured solver only. Default: true.
+    pub chord: bool,
     /// Assemble entries on the rayon pool. Default: true.
     pub parallel: bool,
     /// Progress callback (one report per iteration).
@@ -51,6 +57,7 @@ impl Default for RivConfig {
             stall_tol: 1e-6,
             backtracking: true,
             solver: StepSolver::Structured,
+            chord: true,
             parallel: true,
             progress: ProgressSink::none(),
         }
@@ -138,6 +145,122 @@ pub const STALL_STEP_FRACTION: f64 = 0.125;
 /// SK steps of the rescue when the refined-IV iterations stop far from the optimum.
 pub const SK_RESCUE: usize = 10;
 
+/// A step reuses the matrix of the last full step ([`chord_step`]) while the
+/// parameters are within this relative distance of the ones it was formed at (the
+/// largest relative change of the poles, numerators, delay or factor parameters, as for
+/// [`RivConfig::param_tol`]). On the wafer stage the full steps change the parameters
+/// by 0.27, 0.065, 0.009, 2e-4 and 2e-5 relative: the chord takes over from the fourth.
+pub const CHORD_MAX_DRIFT: f64 = 1e-2;
+
+/// ... and while no submodel's pole has moved by more than this fraction of its
+/// half-bandwidth `|Re p|` (the matrix of a lightly damped mode changes with its pole
+/// on that scale, whatever the relative change of the parameters as a whole).
+pub const CHORD_MAX_POLE_SHIFT: f64 = 0.1;
+
+/// ... and while the cost has fallen by less than this fraction of its value there: the
+/// regressor (eq. 14) holds the residual, and a step that removed most of it changed
+/// the matrix whatever the parameters did (on the wafer stage, the step after an added
+/// mode lowers the cost by 99.8 % and the chord after it contracts by 0.003 where a
+/// full step contracts by 3e-5).
+pub const CHORD_MAX_COST_FALL: f64 = 0.1;
+
+/// A chord step that changes the parameters by more than this fraction of the step
+/// before it did not contract enough: the next step forms the matrix again.
+pub const CHORD_MIN_CONTRACTION: f64 = 0.5;
+
+/// Factors a chord step may hold at most (bytes): above this (large problems, where the
+/// per-entry blocks grow with the square of the modes) every step is a full one.
+pub const CHORD_MAX_BYTES: usize = 256 << 20;
+
+/// The factors of the last full step of Algorithm 1, with the parameters and method
+/// they were formed at, for the chord steps of a later refinement of the same structure
+/// ([`iterate_warm`]).
+#[derive(Debug, Clone)]
+pub struct WarmFactors {
+    factors: StepFactors,
+    method: IvMethod,
+    shared: Vec<f64>,
+    eta: Vec<f64>,
+    /// Upper pole of each submodel at those parameters.
+    poles: Vec<Option<C64>>,
+    /// The cost there.
+    cost: f64,
+}
+
+/// The upper pole of each submodel of `model`.
+fn upper_poles(model: &AdditiveModel) -> Vec<Option<C64>> {
+    model
+        .submodels
+        .iter()
+        .map(|s| model.upper_pole(s))
+        .collect()
+}
+
+impl WarmFactors {
+    /// The largest move of a submodel's pole from where the factors were formed, in
+    /// units of its half-power half-bandwidth `|Re p|` (infinite when a submodel's poles
+    /// changed between complex and real).
+    fn pole_shift(&self, model: &AdditiveModel) -> f64 {
+        let now = upper_poles(model);
+        if now.len() != self.poles.len() {
+            return f64::INFINITY;
+        }
+        now.iter()
+            .zip(&self.poles)
+            .map(|(a, b)| match (a, b) {
+                (Some(a), Some(b)) => (a - b).norm() / b.re.abs().max(1e-6 * b.norm()),
+                (None, None) => 0.0,
+                _ => f64::INFINITY,
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// The relative distance of the parameters `(shared, eta)` from the ones the factors
+    /// were formed at, or `None` when they belong to another structure or method.
+    fn drift(
+        &self,
+        lay: &Layout,
+        m: usize,
+        method: IvMethod,
+        shared: &[f64],
+        eta: &[f64],
+    ) -> Option<f64> {
+        if method != self.method
+            || !self.factors.fits(lay, m)
+            || shared.len() != self.shared.len()
+            || eta.len() != self.eta.len()
+        {
+            return None;
+        }
+        let ds: Vec<f64> = shared
+            .iter()
+            .zip(&self.shared)
+            .map(|(a, b)| a - b)
+            .collect();
+        let de: Vec<f64> = eta.iter().zip(&self.eta).map(|(a, b)| a - b).collect();
+        Some(relative_change(lay, &ds, shared, &de, eta))
+    }
+}
+
+/// The relative size of the change `(d_s, d_e)` of the parameters `(shared, eta)`: the
+/// largest over the numerators, the denominators, the delay (against 1 us at least) and
+/// the factor parameters.
+fn relative_change(lay: &Layout, d_s: &[f64], shared: &[f64], d_e: &[f64], eta: &[f64]) -> f64 {
+    let mut rel = rel_norm(d_e, eta);
+    if lay.n_den > 0 {
+        rel = rel.max(rel_norm(&d_s[..lay.n_den], &shared[..lay.n_den]));
+    }
+    if lay.fit_delay {
+        let tau = shared[lay.n_den];
+        rel = rel.max(d_s[lay.n_den].abs() / tau.abs().max(1e-6));
+    }
+    if lay.n_factor > 0 {
+        let f0 = lay.n_shared() - lay.n_factor;
+        rel = rel.max(rel_norm(&d_s[f0..], &shared[f0..]));
+    }
+    rel
+}
+
 /// The iterations of Algorithm 1 from `model` on `data`.
 ///
 /// Far from the optimum the refined instrument can point uphill, and the iterations
@@ -151,7 +274,20 @@ pub fn iterate(
     data: &FitData,
     cfg: &RivConfig,
 ) -> Result<Fit<AdditiveModel>, RivError> {
-    let first = iterate_core(model.clone(), data, cfg)?;
+    iterate_warm(model, data, cfg, &mut None)
+}
+
+/// [`iterate`], starting with the factors of an earlier refinement of the same
+/// structure on the same `data` when `warm` holds them and the parameters are close to
+/// theirs (its steps are then chord steps until the matrix must be formed again), and
+/// leaving the factors of its last full step in `warm`.
+pub fn iterate_warm(
+    model: AdditiveModel,
+    data: &FitData,
+    cfg: &RivConfig,
+    warm: &mut Option<WarmFactors>,
+) -> Result<Fit<AdditiveModel>, RivError> {
+    let first = iterate_core(model.clone(), data, cfg, warm)?;
     let stalled =
         matches!(first.convergence, Convergence::Failed { .. }) && cfg.method == IvMethod::Riv;
     if !stalled {
@@ -163,8 +299,9 @@ pub fn iterate(
         progress: ProgressSink::none(),
         ..cfg.clone()
     };
-    let sk = iterate_core(model, data, &sk_cfg)?;
-    let mut second = iterate_core(sk.model, data, cfg)?;
+    *warm = None;
+    let sk = iterate_core(model, data, &sk_cfg, &mut None)?;
+    let mut second = iterate_core(sk.model, data, cfg, warm)?;
     let c_first = first.final_cost().unwrap_or(f64::INFINITY);
     let c_second = second.final_cost().unwrap_or(f64::INFINITY);
     if c_second > c_first {
@@ -191,6 +328,7 @@ fn iterate_core(
     mut model: AdditiveModel,
     data: &FitData,
     cfg: &RivConfig,
+    warm: &mut Option<WarmFactors>,
 ) -> Result<Fit<AdditiveModel>, RivError> {
     let t0 = Instant::now();
     if model.ny() != data.ny || model.nu() != data.nu {
@@ -239,18 +377,99 @@ fn iterate_core(
     // consecutive stalled steps and their relative cost decrease in total
     let (mut stalled, mut stalled_decrease) = (0, 0.0);
     let method = cfg.method;
+    let keep = cfg.chord
+        && cfg.solver == StepSolver::Structured
+        && StepFactors::bytes(m, lay.n_num, lay.n_shared()) <= CHORD_MAX_BYTES;
+    // the relative change of the last step, and whether a chord step may follow it
+    let (mut last_rel, mut chord_ok) = (f64::INFINITY, true);
     for it in 1..=cfg.max_iterations {
         iterations = it;
-        let upd = match step(
-            data,
-            &lay,
-            &subs,
-            &basis,
-            &eta,
-            method,
-            cfg.solver,
-            cfg.parallel,
-        ) {
+        // a chord step while the parameters are near those of the kept factors; one
+        // that is not accepted at its full length gives way to a full step
+        let mut chord = keep
+            && chord_ok
+            && warm.as_ref().is_some_and(|w| {
+                w.drift(&lay, m, method, &shared, &eta)
+                    .is_some_and(|d| d <= CHORD_MAX_DRIFT)
+                    && w.pole_shift(&model) <= CHORD_MAX_POLE_SHIFT
+                    && c >= (1.0 - CHORD_MAX_COST_FALL) * w.cost
+            });
+        let (upd, alpha, accepted) = loop {
+            let upd = if chord {
+                let w = warm.as_ref().expect("checked above");
+                chord_step(
+                    data,
+                    &lay,
+                    &subs,
+                    &basis,
+                    &eta,
+                    method,
+                    cfg.parallel,
+                    &w.factors,
+                )
+            } else {
+                step_keeping(
+                    data,
+                    &lay,
+                    &subs,
+                    &basis,
+                    &eta,
+                    method,
+                    cfg.solver,
+                    cfg.parallel,
+                    keep,
+                )
+                .map(|(u, f)| {
+                    *warm = f.map(|factors| WarmFactors {
+                        factors,
+                        method,
+                        shared: shared.clone(),
+                        eta: eta.clone(),
+                        poles: upper_poles(&model),
+                        cost: c,
+                    });
+                    u
+                })
+            };
+            let upd = match upd {
+                Ok(u) => u,
+                Err(RivError::Numerical { .. }) if chord => {
+                    chord = false;
+                    continue;
+                }
+                Err(e) => break (Err(e), 1.0, None),
+            };
+            let mut alpha = 1.0;
+            let mut accepted = None;
+            for _ in 0..=if chord { 0 } else { 12 } {
+                let s_new: Vec<f64> = shared
+                    .iter()
+                    .zip(&upd.d_shared)
+                    .map(|(a, d)| a + alpha * d)
+                    .collect();
+                let e_new: Vec<f64> = eta
+                    .iter()
+                    .zip(&upd.d_eta)
+                    .map(|(a, d)| a + alpha * d)
+                    .collect();
+                let mut trial = model.clone();
+                unpack(&mut trial, &lay, &s_new, &e_new);
+                let b_new = Basis::new(&trial, &lay, &data.omega);
+                let c_new = cost(data, &lay, &b_new, &e_new, None, &ng);
+                let ok = c_new.is_finite() && (!cfg.backtracking || c_new <= c * (1.0 + 1e-10));
+                if ok {
+                    accepted = Some((s_new, e_new, trial, b_new, c_new));
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            if chord && accepted.is_none() {
+                chord = false;
+                continue;
+            }
+            break (Ok(upd), alpha, accepted);
+        };
+        let upd = match upd {
             Ok(u) => u,
             Err(RivError::Numerical { what, why }) => {
                 convergence = Convergence::Failed {
@@ -261,30 +480,6 @@ fn iterate_core(
             Err(e) => return Err(e),
         };
         worst_cond = worst_cond.max(upd.cond_shared);
-        let mut alpha = 1.0;
-        let mut accepted = None;
-        for _ in 0..=12 {
-            let s_new: Vec<f64> = shared
-                .iter()
-                .zip(&upd.d_shared)
-                .map(|(a, d)| a + alpha * d)
-                .collect();
-            let e_new: Vec<f64> = eta
-                .iter()
-                .zip(&upd.d_eta)
-                .map(|(a, d)| a + alpha * d)
-                .collect();
-            let mut trial = model.clone();
-            unpack(&mut trial, &lay, &s_new, &e_new);
-            let b_new = Basis::new(&trial, &lay, &data.omega);
-            let c_new = cost(data, &lay, &b_new, &e_new, None, &ng);
-            let ok = c_new.is_finite() && (!cfg.backtracking || c_new <= c * (1.0 + 1e-10));
-            if ok {
-                accepted = Some((s_new, e_new, trial, b_new, c_new));
-                break;
-            }
-            alpha *= 0.5;
-        }
         let (s_new, e_new, trial, b_new, c_new) = match accepted {
             Some(a) => a,
             None => {
@@ -315,18 +510,15 @@ fn iterate_core(
         };
         let d_s: Vec<f64> = upd.d_shared.iter().map(|d| alpha * d).collect();
         let d_e: Vec<f64> = upd.d_eta.iter().map(|d| alpha * d).collect();
-        let mut rel = rel_norm(&d_e, &eta);
-        if lay.n_den > 0 {
-            rel = rel.max(rel_norm(&d_s[..lay.n_den], &shared[..lay.n_den]));
+        let rel = relative_change(&lay, &d_s, &shared, &d_e, &eta);
+        // a chord step must contract like the iterations it replaces; otherwise the
+        // next step forms the matrix again
+        if chord {
+            chord_ok = rel <= CHORD_MIN_CONTRACTION * last_rel;
+        } else {
+            chord_ok = true;
         }
-        if lay.fit_delay {
-            let tau = shared[lay.n_den];
-            rel = rel.max(d_s[lay.n_den].abs() / tau.abs().max(1e-6));
-        }
-        if lay.n_factor > 0 {
-            let f0 = lay.n_shared() - lay.n_factor;
-            rel = rel.max(rel_norm(&d_s[f0..], &shared[f0..]));
-        }
+        last_rel = rel;
         let rel_cost = (c - c_new).abs() / c.max(f64::MIN_POSITIVE);
         shared = s_new;
         eta = e_new;
@@ -341,6 +533,8 @@ fn iterate_core(
             Some(c * norm),
             if alpha < 1.0 {
                 format!("relative change {rel:.2e} (step {alpha:.3e} of the full update)")
+            } else if chord {
+                format!("relative change {rel:.2e} (chord step)")
             } else {
                 format!("relative change {rel:.2e}")
             },

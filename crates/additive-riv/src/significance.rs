@@ -8,11 +8,9 @@
 //! parameter removes on average 1/2. With other weightings the same holds up to an
 //! unknown scale `s^2`, estimated as `V / (N m - P / 2)`.
 
-use crate::problem::{pack, Basis, EntryLines, FitData, Layout};
+use crate::problem::{pack, Basis, FitData, Layout};
 use crate::small::spd_solve;
 use crate::{AdditiveModel, RivError};
-use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, Par};
 use rayon::prelude::*;
 
 /// Standard normal quantile (Acklam's rational approximation; absolute error below
@@ -78,6 +76,9 @@ pub fn noise_scale(v: f64, data: &FitData, n_params: usize) -> f64 {
     v / dof
 }
 
+/// Bytes of Gram matrices [`submodel_cost_increase`] forms at once.
+const GRAM_CHUNK_BYTES: usize = 64 << 20;
+
 /// Per submodel, the increase of the cost `sum w |E|^2` when its numerators are removed
 /// and the other numerators refitted with all denominators held fixed (a Wald statistic,
 /// exact for the linear numerator problem (24)).
@@ -93,76 +94,29 @@ pub fn submodel_cost_increase(model: &AdditiveModel, data: &FitData) -> Result<V
         .enumerate()
         .map(|(i, s)| (lay.num_offset[i], s.num.len()))
         .collect();
-    let ng = crate::problem::groups(model, &lay);
-    let per_entry = |e: usize| -> Result<Vec<f64>, RivError> {
-        let mut el = EntryLines::default();
-        el.fill(e, data, &basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        let a = basis.scaled_columns(&el.s, nn, 0);
-        let mut z = Mat::<f64>::zeros(nn, nn);
-        matmul(
-            z.as_mut(),
-            Accum::Replace,
-            a.transpose(),
-            a.as_ref(),
-            1.0,
-            Par::Seq,
-        );
-        let mut h = vec![0.0; nn * nn];
-        for j in 0..nn {
-            for i in 0..nn {
-                h[j * nn + i] = z[(i, j)];
-            }
-        }
-        let identity = |nn: usize| {
-            let mut inv = vec![0.0; nn * nn];
-            for j in 0..nn {
-                inv[j * nn + j] = 1.0;
-            }
-            inv
-        };
-        let mut inv = identity(nn);
-        let h0 = h.clone();
-        if spd_solve(&mut h, nn, &mut inv, nn).is_none() {
-            // Numerically dependent basis functions: two modes closer than the
-            // duplicate test resolves (a rank-2 residue split into two poles a fraction
-            // of a bandwidth apart). A ridge of 1e-10 of the largest diagonal keeps the
-            // solve defined; a group in the span of the others then gets a cost
-            // increase near zero, i.e. it is insignificant, which is the statistical
-            // answer for a duplicate.
-            let ridge = 1e-10 * (0..nn).map(|j| h0[j * nn + j]).fold(0.0_f64, f64::max);
-            h = h0;
-            for j in 0..nn {
-                h[j * nn + j] += ridge;
-            }
-            inv = identity(nn);
-            spd_solve(&mut h, nn, &mut inv, nn).ok_or_else(|| RivError::Numerical {
-                what: "submodel significance".into(),
-                why: "dependent numerator basis functions (duplicate modes)".into(),
-            })?;
-        }
-        let be = &eta[e * nn..(e + 1) * nn];
-        let mut out = Vec::with_capacity(groups.len());
-        for &(off, len) in &groups {
-            // eta_I^T [ (H^-1)_II ]^-1 eta_I
-            let mut blk = vec![0.0; len * len];
-            for c in 0..len {
-                for r in 0..len {
-                    blk[c * len + r] = inv[(off + c) * nn + off + r];
-                }
-            }
-            let mut x: Vec<f64> = be[off..off + len].to_vec();
-            let val = match spd_solve(&mut blk, len, &mut x, 1) {
-                Some(_) => be[off..off + len].iter().zip(&x).map(|(a, b)| a * b).sum(),
-                None => f64::INFINITY,
-            };
-            out.push(val);
-        }
-        Ok(out)
-    };
-    let per: Vec<Vec<f64>> = (0..m)
-        .into_par_iter()
-        .map(per_entry)
-        .collect::<Result<_, _>>()?;
+    let n = data.n;
+    // the Gram matrices U^T S_e^2 U of the entries from the basis products they share
+    // (crate::gram), a chunk of entries at a time so that they hold at most
+    // GRAM_CHUNK_BYTES
+    let s2 = crate::gram::squared_scales(&data.sqrt_w, &basis, m);
+    let chunk = (GRAM_CHUNK_BYTES / (8 * nn * nn).max(1)).clamp(1, m.max(1));
+    let mut per: Vec<Vec<f64>> = Vec::with_capacity(m);
+    for e0 in (0..m).step_by(chunk) {
+        let ne = chunk.min(m - e0);
+        let grams = crate::gram::numerator_grams(&basis, nn, &s2[e0 * n..(e0 + ne) * n], ne, true);
+        let part: Vec<Vec<f64>> = (0..ne)
+            .into_par_iter()
+            .map(|t| {
+                let e = e0 + t;
+                entry_cost_increases(
+                    &grams[t * nn * nn..(t + 1) * nn * nn],
+                    &eta[e * nn..(e + 1) * nn],
+                    &groups,
+                )
+            })
+            .collect::<Result<_, _>>()?;
+        per.extend(part);
+    }
     let mut total = vec![0.0; groups.len()];
     for v in &per {
         for (t, x) in total.iter_mut().zip(v) {
@@ -170,6 +124,61 @@ pub fn submodel_cost_increase(model: &AdditiveModel, data: &FitData) -> Result<V
         }
     }
     Ok(total)
+}
+
+/// Per entry, the cost increases of [`submodel_cost_increase`] from the entry's Gram
+/// matrix `gram` of the numerator basis.
+fn entry_cost_increases(
+    gram: &[f64],
+    be: &[f64],
+    groups: &[(usize, usize)],
+) -> Result<Vec<f64>, RivError> {
+    let nn = be.len();
+    let mut h = gram.to_vec();
+    let identity = |nn: usize| {
+        let mut inv = vec![0.0; nn * nn];
+        for j in 0..nn {
+            inv[j * nn + j] = 1.0;
+        }
+        inv
+    };
+    let mut inv = identity(nn);
+    let h0 = h.clone();
+    if spd_solve(&mut h, nn, &mut inv, nn).is_none() {
+        // Numerically dependent basis functions: two modes closer than the
+        // duplicate test resolves (a rank-2 residue split into two poles a fraction
+        // of a bandwidth apart). A ridge of 1e-10 of the largest diagonal keeps the
+        // solve defined; a group in the span of the others then gets a cost
+        // increase near zero, i.e. it is insignificant, which is the statistical
+        // answer for a duplicate.
+        let ridge = 1e-10 * (0..nn).map(|j| h0[j * nn + j]).fold(0.0_f64, f64::max);
+        h = h0;
+        for j in 0..nn {
+            h[j * nn + j] += ridge;
+        }
+        inv = identity(nn);
+        spd_solve(&mut h, nn, &mut inv, nn).ok_or_else(|| RivError::Numerical {
+            what: "submodel significance".into(),
+            why: "dependent numerator basis functions (duplicate modes)".into(),
+        })?;
+    }
+    let mut out = Vec::with_capacity(groups.len());
+    for &(off, len) in groups {
+        // eta_I^T [ (H^-1)_II ]^-1 eta_I
+        let mut blk = vec![0.0; len * len];
+        for c in 0..len {
+            for r in 0..len {
+                blk[c * len + r] = inv[(off + c) * nn + off + r];
+            }
+        }
+        let mut x: Vec<f64> = be[off..off + len].to_vec();
+        let val = match spd_solve(&mut blk, len, &mut x, 1) {
+            Some(_) => be[off..off + len].iter().zip(&x).map(|(a, b)| a * b).sum(),
+            None => f64::INFINITY,
+        };
+        out.push(val);
+    }
+    Ok(out)
 }
 
 /// The F statistic of adding (or keeping) a group of `p` real parameters that lowers the

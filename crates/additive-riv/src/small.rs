@@ -12,8 +12,18 @@ use faer::Mat;
 /// removes the scale differences between numerator coefficients of submodels with
 /// very different gains. Returns an estimate of the condition number of the
 /// equilibrated matrix (`(max L_ii / min L_ii)^2`), or `None` when `A` is not positive
-/// definite (dependent basis functions: two submodels with the same poles).
+/// definite (dependent basis functions: two submodels with the same poles). `a` holds
+/// the factor of [`spd_factor`] afterwards.
 pub fn spd_solve(a: &mut [f64], n: usize, b: &mut [f64], nrhs: usize) -> Option<f64> {
+    let (d, c) = spd_factor(a, n)?;
+    spd_apply(a, &d, n, b, nrhs);
+    Some(c)
+}
+
+/// The equilibrated Cholesky factor of [`spd_solve`]: overwrites the lower triangle of
+/// `a` with `L` (`D A D = L L^T`) and returns `D`'s diagonal and the condition estimate,
+/// or `None` when `A` is not positive definite. [`spd_apply`] solves with it.
+pub fn spd_factor(a: &mut [f64], n: usize) -> Option<(Vec<f64>, f64)> {
     let mut d = vec![0.0; n];
     for i in 0..n {
         let aii = a[i * n + i];
@@ -49,6 +59,12 @@ pub fn spd_solve(a: &mut [f64], n: usize, b: &mut [f64], nrhs: usize) -> Option<
             a[j * n + i] = s / ljj;
         }
     }
+    Some((d, (lmax / lmin).powi(2)))
+}
+
+/// Solves `A X = B` (`nrhs` columns of `b`, overwritten) with the factor `l`, `d` of
+/// [`spd_factor`].
+pub fn spd_apply(l: &[f64], d: &[f64], n: usize, b: &mut [f64], nrhs: usize) {
     for c in 0..nrhs {
         let x = &mut b[c * n..(c + 1) * n];
         for i in 0..n {
@@ -58,24 +74,22 @@ pub fn spd_solve(a: &mut [f64], n: usize, b: &mut [f64], nrhs: usize) -> Option<
         for i in 0..n {
             let mut s = x[i];
             for k in 0..i {
-                s -= a[k * n + i] * x[k];
+                s -= l[k * n + i] * x[k];
             }
-            x[i] = s / a[i * n + i];
+            x[i] = s / l[i * n + i];
         }
         // backward: L^T z = y
         for i in (0..n).rev() {
             let mut s = x[i];
             for k in i + 1..n {
-                s -= a[i * n + k] * x[k];
+                s -= l[i * n + k] * x[k];
             }
-            x[i] = s / a[i * n + i];
+            x[i] = s / l[i * n + i];
         }
         for i in 0..n {
             x[i] *= d[i];
         }
     }
-    let c = (lmax / lmin).powi(2);
-    Some(c)
 }
 
 /// Solves the general square system `A x = b` with column equilibration and an LU with

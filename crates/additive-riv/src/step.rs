@@ -22,7 +22,7 @@
 //! `O(lines * entries * (n_num + n_shared)^2)`: linear in lines and in `ny nu`.
 
 use crate::problem::{Basis, EntryLines, FitData, Layout};
-use crate::small::{lu_solve, spd_solve};
+use crate::small::{lu_solve, spd_apply, spd_factor};
 use crate::RivError;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
@@ -87,6 +87,7 @@ fn fill_entry(
     el: &EntryLines,
     method: IvMethod,
     be: &[f64],
+    regressor: bool,
     y: &mut Mat<f64>,
     x: &mut Mat<f64>,
 ) {
@@ -102,6 +103,7 @@ fn fill_entry(
         el: &'a EntryLines,
         method: IvMethod,
         be: &'a [f64],
+        regressor: bool,
         y: &'a mut Mat<f64>,
         x: &'a mut Mat<f64>,
     }
@@ -119,6 +121,7 @@ fn fill_entry(
                 self.el,
                 self.method,
                 self.be,
+                self.regressor,
                 self.y,
                 self.x,
             )
@@ -134,6 +137,7 @@ fn fill_entry(
         el,
         method,
         be,
+        regressor,
         y,
         x,
     })
@@ -150,9 +154,13 @@ fn fill_entry_kernel(
     el: &EntryLines,
     method: IvMethod,
     be: &[f64],
+    regressor: bool,
     y: &mut Mat<f64>,
     x: &mut Mat<f64>,
 ) {
+    // the regressor's columns (all but `eps`) are needed by a full step and by SK,
+    // whose instrument they are
+    let regressor = regressor || method == IvMethod::Sk;
     let n = data.n;
     let (k0, k1) = (lines.start, lines.end);
     let len = k1 - k0;
@@ -199,7 +207,7 @@ fn fill_entry_kernel(
                     }
                 }
             }
-            {
+            if regressor {
                 let (ir, ii) = y.col_as_slice(nn + d)[..2 * len].split_at(len);
                 let (cr, ci) = x.col_as_slice_mut(d)[..2 * len].split_at_mut(len);
                 for k in 0..len {
@@ -231,7 +239,7 @@ fn fill_entry_kernel(
         let on = basis.dlnf_mask[q * m + e];
         let dl = &basis.dlnf[q * n + k0..q * n + k1];
         let is_delay = lay.fit_delay && q == 0;
-        {
+        if regressor {
             let (cr, ci) = x.col_as_slice_mut(nd + q)[..2 * len].split_at_mut(len);
             for k in 0..len {
                 if on {
@@ -305,6 +313,56 @@ struct EntryParts {
     /// `g_s - H_sn k_e`.
     r_vec: Vec<f64>,
     cond: f64,
+    /// What a chord step reuses (when asked for): the factor of `H_nn`
+    /// ([`spd_factor`]: `L` and the equilibration) and `H_sn = V_hat^T U` (`ns x nn`,
+    /// column-major).
+    kept: Option<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+}
+
+/// The per-entry eliminations and the shared Schur system of one full step, kept so
+/// that the next steps can reuse them ([`chord_step`]).
+///
+/// A step solves `M(theta) Delta = Y(theta)^T eps(theta)` (module docs); the fixed point
+/// is where the right-hand side vanishes, whatever `M` is. Near the fixed point `M`
+/// changes little from one iterate to the next, and a step with the matrix of an
+/// earlier iterate and the right-hand side of the current one (the chord method)
+/// converges to the same fixed point at a rate set by how much `M` moved, for the price
+/// of the instrument's fill and one product with the residual instead of the products
+/// `Y^T X` (most of a full step's time).
+#[derive(Debug, Clone)]
+pub struct StepFactors {
+    nn: usize,
+    ns: usize,
+    /// Per entry.
+    entries: Vec<EntryFactor>,
+    /// The Schur system `sum_e H_ss - H_sn K_e`.
+    schur: Mat<f64>,
+}
+
+/// One entry's part of [`StepFactors`] (column-major matrices).
+#[derive(Debug, Clone)]
+struct EntryFactor {
+    /// The factor `L` of the equilibrated `H_nn` (`nn x nn`, [`spd_factor`]).
+    l: Vec<f64>,
+    /// Its equilibration `D`.
+    d: Vec<f64>,
+    /// `K_e = H_nn^{-1} H_ns` (`nn x ns`).
+    k_mat: Vec<f64>,
+    /// `H_sn = V_hat^T U` (`ns x nn`).
+    h_sn: Vec<f64>,
+}
+
+impl StepFactors {
+    /// Bytes the factors of a problem with `m` entries, `nn` numerator and `ns` shared
+    /// parameters hold.
+    pub fn bytes(m: usize, nn: usize, ns: usize) -> usize {
+        8 * (m * (nn * nn + nn + 2 * nn * ns) + ns * ns)
+    }
+
+    /// Whether these factors belong to a problem with this layout.
+    pub fn fits(&self, lay: &Layout, m: usize) -> bool {
+        self.nn == lay.n_num && self.ns == lay.n_shared() && self.entries.len() == m
+    }
 }
 
 /// Computes the update of one step of Algorithm 1.
@@ -320,9 +378,28 @@ pub fn step(
     solver: StepSolver,
     parallel: bool,
 ) -> Result<StepUpdate, RivError> {
+    step_keeping(data, lay, subs, basis, eta, method, solver, parallel, false).map(|r| r.0)
+}
+
+/// [`step`], also returning the factors a [`chord_step`] reuses when `keep` is set and
+/// the solver is the structured one.
+#[allow(clippy::too_many_arguments)]
+pub fn step_keeping(
+    data: &FitData,
+    lay: &Layout,
+    subs: &[(usize, usize)],
+    basis: &Basis,
+    eta: &[f64],
+    method: IvMethod,
+    solver: StepSolver,
+    parallel: bool,
+    keep: bool,
+) -> Result<(StepUpdate, Option<StepFactors>), RivError> {
     match solver {
-        StepSolver::Structured => step_structured(data, lay, subs, basis, eta, method, parallel),
-        StepSolver::Dense => step_dense(data, lay, subs, basis, eta, method),
+        StepSolver::Structured => {
+            step_structured(data, lay, subs, basis, eta, method, parallel, keep)
+        }
+        StepSolver::Dense => Ok((step_dense(data, lay, subs, basis, eta, method)?, None)),
     }
 }
 
@@ -331,6 +408,7 @@ pub fn step(
 /// the whole `2n`-row matrices first and multiplying them after is bound by memory.
 const LINE_BLOCK: usize = 256;
 
+#[allow(clippy::too_many_arguments)]
 fn step_structured(
     data: &FitData,
     lay: &Layout,
@@ -339,7 +417,8 @@ fn step_structured(
     eta: &[f64],
     method: IvMethod,
     parallel: bool,
-) -> Result<StepUpdate, RivError> {
+    keep: bool,
+) -> Result<(StepUpdate, Option<StepFactors>), RivError> {
     let n = data.n;
     let m = data.m();
     let nn = lay.n_num;
@@ -371,6 +450,7 @@ fn step_structured(
                 el,
                 method,
                 &eta[e * nn..(e + 1) * nn],
+                true,
                 y,
                 x,
             );
@@ -401,18 +481,18 @@ fn step_structured(
                 rhs[c * nn + i] = zr[(i, c)];
             }
         }
-        let cond =
-            spd_solve(&mut h_nn, nn, &mut rhs, ns + 1).ok_or_else(|| RivError::Numerical {
-                what: format!(
-                    "numerator block of entry G{}_{}",
-                    e % data.ny + 1,
-                    e / data.ny + 1
-                ),
-                why: "the numerator basis functions are linearly dependent over the weighted \
+        let (h_d, cond) = spd_factor(&mut h_nn, nn).ok_or_else(|| RivError::Numerical {
+            what: format!(
+                "numerator block of entry G{}_{}",
+                e % data.ny + 1,
+                e / data.ny + 1
+            ),
+            why: "the numerator basis functions are linearly dependent over the weighted \
                   lines (two submodels with the same poles, or a mode with no weighted \
                   line near it); remove duplicate modes or widen the band"
-                    .into(),
-            })?;
+                .into(),
+        })?;
+        spd_apply(&h_nn, &h_d, nn, &mut rhs, ns + 1);
         // S_e = H_ss - H_sn K ; r_e = g_s - H_sn k
         let mut s_mat = vec![0.0; ns * ns];
         let mut r_vec = vec![0.0; ns];
@@ -434,12 +514,22 @@ fn step_structured(
         }
         let k_vec = rhs[ns * nn..].to_vec();
         rhs.truncate(ns * nn);
+        let kept = keep.then(|| {
+            let mut h_sn = vec![0.0; ns * nn];
+            for t in 0..nn {
+                for r in 0..ns {
+                    h_sn[t * ns + r] = zl[(r, t)];
+                }
+            }
+            (h_nn, h_d, h_sn)
+        });
         Ok(EntryParts {
             k_mat: rhs,
             k_vec,
             s_mat,
             r_vec,
             cond,
+            kept,
         })
     };
     let init = || -> Bufs {
@@ -488,19 +578,176 @@ fn step_structured(
     };
     let mut d_eta = vec![0.0; m * nn];
     for (e, p) in parts.iter().enumerate() {
-        for t in 0..nn {
-            let mut v = p.k_vec[t];
-            for c in 0..ns {
-                v -= p.k_mat[c * nn + t] * d_shared[c];
-            }
-            d_eta[e * nn + t] = v;
+        back_substitute(
+            &p.k_vec,
+            &p.k_mat,
+            &d_shared,
+            &mut d_eta[e * nn..(e + 1) * nn],
+        );
+    }
+    let update = StepUpdate {
+        d_shared,
+        d_eta,
+        cond_shared,
+        cond_numerator: cond_num,
+    };
+    let factors = keep.then(|| StepFactors {
+        nn,
+        ns,
+        entries: parts
+            .into_iter()
+            .map(|p| {
+                let (l, d, h_sn) = p.kept.expect("kept when asked for");
+                EntryFactor {
+                    l,
+                    d,
+                    k_mat: p.k_mat,
+                    h_sn,
+                }
+            })
+            .collect(),
+        schur: s,
+    });
+    Ok((update, factors))
+}
+
+/// `d_eta_e = k_e - K_e d_shared` (the back-substitution of the eliminated numerators).
+fn back_substitute(k_vec: &[f64], k_mat: &[f64], d_shared: &[f64], out: &mut [f64]) {
+    let nn = k_vec.len();
+    for t in 0..nn {
+        let mut v = k_vec[t];
+        for (c, ds) in d_shared.iter().enumerate() {
+            v -= k_mat[c * nn + t] * ds;
         }
+        out[t] = v;
+    }
+}
+
+/// One step of Algorithm 1 with the matrix of an earlier iterate (`factors`, from
+/// [`step_keeping`]) and the right-hand side `Y^T eps` of the current one: the chord
+/// method (see [`StepFactors`]). Its fixed point is that of [`step`]; its cost is the
+/// instrument's fill and one product with the residual per entry.
+#[allow(clippy::too_many_arguments)]
+pub fn chord_step(
+    data: &FitData,
+    lay: &Layout,
+    subs: &[(usize, usize)],
+    basis: &Basis,
+    eta: &[f64],
+    method: IvMethod,
+    parallel: bool,
+    factors: &StepFactors,
+) -> Result<StepUpdate, RivError> {
+    let n = data.n;
+    let m = data.m();
+    let nn = lay.n_num;
+    let ns = lay.n_shared();
+    if !factors.fits(lay, m) {
+        return Err(RivError::invalid(
+            "step factors",
+            format!(
+                "{} x ({} + {})",
+                factors.entries.len(),
+                factors.nn,
+                factors.ns
+            ),
+            format!("the problem is {m} x ({nn} + {ns})"),
+        ));
+    }
+    let ng = num_groups(subs, lay);
+    let dg = den_groups(subs, lay);
+    type Bufs = (Mat<f64>, Mat<f64>, Mat<f64>, EntryLines);
+    // per entry: k_e = H_nn^{-1} g_n and r_e = g_s - H_sn k_e
+    let per_entry = |e: usize, bufs: &mut Bufs| -> (Vec<f64>, Vec<f64>) {
+        let (y, x, g, el) = bufs;
+        el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
+        for (b, k0) in (0..n).step_by(LINE_BLOCK).enumerate() {
+            let k1 = (k0 + LINE_BLOCK).min(n);
+            let rows = 2 * (k1 - k0);
+            fill_entry(
+                e,
+                k0..k1,
+                data,
+                lay,
+                &dg,
+                basis,
+                el,
+                method,
+                &eta[e * nn..(e + 1) * nn],
+                false,
+                y,
+                x,
+            );
+            let acc = if b == 0 { Accum::Replace } else { Accum::Add };
+            matmul(
+                g.as_mut(),
+                acc,
+                y.as_ref().subrows(0, rows).transpose(),
+                x.as_ref().subrows(0, rows).subcols(ns, 1),
+                1.0,
+                Par::Seq,
+            );
+        }
+        let ef = &factors.entries[e];
+        let h_sn = &ef.h_sn;
+        let mut k: Vec<f64> = (0..nn).map(|i| g[(i, 0)]).collect();
+        spd_apply(&ef.l, &ef.d, nn, &mut k, 1);
+        let r: Vec<f64> = (0..ns)
+            .map(|row| {
+                let mut v = g[(nn + row, 0)];
+                for (t, kt) in k.iter().enumerate() {
+                    v -= h_sn[t * ns + row] * kt;
+                }
+                v
+            })
+            .collect();
+        (k, r)
+    };
+    let init = || -> Bufs {
+        (
+            Mat::<f64>::zeros(2 * LINE_BLOCK.min(n), nn + ns),
+            Mat::<f64>::zeros(2 * LINE_BLOCK.min(n), ns + 1),
+            Mat::<f64>::zeros(nn + ns, 1),
+            EntryLines::default(),
+        )
+    };
+    let parts: Vec<(Vec<f64>, Vec<f64>)> = if parallel && m > 1 {
+        (0..m)
+            .into_par_iter()
+            .map_init(init, |b, e| per_entry(e, b))
+            .collect()
+    } else {
+        let mut b = init();
+        (0..m).map(|e| per_entry(e, &mut b)).collect()
+    };
+    let mut r = vec![0.0; ns];
+    for (_, re) in &parts {
+        for (ri, v) in r.iter_mut().zip(re) {
+            *ri += v;
+        }
+    }
+    let (d_shared, cond_shared) = if ns == 0 {
+        (Vec::new(), 1.0)
+    } else {
+        lu_solve(&factors.schur, &r).ok_or_else(|| RivError::Numerical {
+            what: "shared denominator system (Schur complement) of the chord step".into(),
+            why: "singular".into(),
+        })?
+    };
+    let mut d_eta = vec![0.0; m * nn];
+    for (e, (k, _)) in parts.iter().enumerate() {
+        back_substitute(
+            k,
+            &factors.entries[e].k_mat,
+            &d_shared,
+            &mut d_eta[e * nn..(e + 1) * nn],
+        );
     }
     Ok(StepUpdate {
         d_shared,
         d_eta,
         cond_shared,
-        cond_numerator: cond_num,
+        cond_numerator: 1.0,
     })
 }
 
@@ -540,6 +787,7 @@ fn step_dense(
             &el,
             method,
             &eta[e * nn..(e + 1) * nn],
+            true,
             &mut y,
             &mut x,
         );

@@ -13,7 +13,7 @@
 use crate::complete::EXACT_FIT_REL;
 use crate::pair_start::with_local_pairs;
 use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
-use crate::riv::{iterate, RivConfig};
+use crate::riv::{iterate_warm, RivConfig};
 use crate::significance::{chi2_upper, f_statistic, noise_scale, submodel_cost_increase};
 use crate::{fit_numerators, AdditiveModel, RivError, SubmodelKind};
 use frf_data::{Fit, ModelStructure};
@@ -503,7 +503,10 @@ pub fn adapt_modes(
         max_iterations: riv.max_iterations.min(cfg.coarse_max_iterations),
         ..riv.clone()
     };
-    let mut fit = iterate(start, data, &coarse)?;
+    // the factors of the last full refined-IV step: a refinement of an unchanged
+    // structure starts with chord steps from them (`iterate_warm`)
+    let mut warm = None;
+    let mut fit = iterate_warm(start, data, &coarse, &mut warm)?;
     report.refinements.push(fit.iterations);
     let mut total_iterations = fit.iterations;
     let mut history = fit.cost_history.clone();
@@ -560,7 +563,7 @@ pub fn adapt_modes(
             if let Some(better) = with_local_pairs(&model, data, &stats, n_old, &added, riv) {
                 model = better;
             }
-            iterate(model, data, &coarse)
+            iterate_warm(model, data, &coarse, &mut warm)
         });
         let mut refit = match attempt {
             Ok(f) => f,
@@ -665,7 +668,7 @@ pub fn adapt_modes(
         }
     }
     // converge fully from the last structure
-    let last = iterate(fit.model, data, riv)?;
+    let last = iterate_warm(fit.model, data, riv, &mut warm)?;
     report.refinements.push(last.iterations);
     total_iterations += last.iterations;
     history.extend_from_slice(&last.cost_history);

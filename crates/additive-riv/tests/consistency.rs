@@ -89,6 +89,48 @@ proptest! {
     }
 }
 
+/// Chord steps (the matrix of an earlier full step with the current right-hand side)
+/// end at the fixed point of full steps: on noisy random systems the two refinements
+/// agree to well within the noise's parameter error, and the chord steps were taken.
+#[test]
+fn chord_steps_reach_the_fixed_point_of_full_steps() {
+    use std::sync::{Arc, Mutex};
+    let mut chord_steps = 0;
+    for seed in 0..8u64 {
+        let case = random_case(300 + seed, 2, 3, 4, seed % 2 == 0, Domain::Continuous);
+        let data = simulate(&case.truth, &case.freqs, 1e-3, 11 + seed);
+        let messages = Arc::new(Mutex::new(Vec::<String>::new()));
+        let sink = {
+            let messages = messages.clone();
+            frf_data::ProgressSink::new(move |p| messages.lock().unwrap().push(p.message.clone()))
+        };
+        let with = RivConfig {
+            progress: sink,
+            ..Default::default()
+        };
+        let without = RivConfig {
+            chord: false,
+            ..Default::default()
+        };
+        let a = fit(&case, &data, seed, &with);
+        let b = fit(&case, &data, seed, &without);
+        let diff = max_rel_param_error(&a, &b);
+        let err = max_rel_param_error(&b, &case.truth);
+        chord_steps += messages
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|m| m.contains("chord step"))
+            .count();
+        eprintln!("seed {seed}: chord vs full {diff:.1e}, full vs truth {err:.1e}, chord steps so far {chord_steps}");
+        assert!(
+            diff < 1e-6 * err.max(1e-3),
+            "seed {seed}: chord and full refinements differ by {diff:e} (error vs truth {err:e})"
+        );
+    }
+    assert!(chord_steps > 0, "no chord step was taken");
+}
+
 /// With noise, the parameter error shrinks with the noise level (checked at three
 /// levels, averaged over seeds): the estimator is consistent.
 #[test]
