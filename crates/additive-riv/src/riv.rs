@@ -165,8 +165,13 @@ pub const CHORD_MAX_POLE_SHIFT: f64 = 0.1;
 pub const CHORD_MAX_COST_FALL: f64 = 0.1;
 
 /// A chord step that changes the parameters by more than this fraction of the step
-/// before it did not contract enough: the next step forms the matrix again.
-pub const CHORD_MIN_CONTRACTION: f64 = 0.5;
+/// before it did not contract enough: the next step forms the matrix again. A chord
+/// step follows a full step only when that step and the one before it were taken at
+/// full length and the last was this fraction of the one before it or less (far from
+/// the fixed point, where steps are halved or do not shrink, every step is a full one).
+/// On the wafer stage the full steps from the CMIF start shrink by 0.25 and 0.14, the
+/// chord steps after them by 0.021 and 0.16.
+pub const CHORD_MIN_CONTRACTION: f64 = 0.2;
 
 /// Factors a chord step may hold at most (bytes): above this (large problems, where the
 /// per-entry blocks grow with the square of the modes) every step is a full one.
@@ -382,6 +387,8 @@ fn iterate_core(
         && StepFactors::bytes(m, lay.n_num, lay.n_shared()) <= CHORD_MAX_BYTES;
     // the relative change of the last step, and whether a chord step may follow it
     let (mut last_rel, mut chord_ok) = (f64::INFINITY, true);
+    // whether the last step was taken at full length
+    let mut last_full_length = false;
     for it in 1..=cfg.max_iterations {
         iterations = it;
         // a chord step while the parameters are near those of the kept factors; one
@@ -512,13 +519,13 @@ fn iterate_core(
         let d_e: Vec<f64> = upd.d_eta.iter().map(|d| alpha * d).collect();
         let rel = relative_change(&lay, &d_s, &shared, &d_e, &eta);
         // a chord step must contract like the iterations it replaces; otherwise the
-        // next step forms the matrix again
-        if chord {
-            chord_ok = rel <= CHORD_MIN_CONTRACTION * last_rel;
-        } else {
-            chord_ok = true;
-        }
+        // next step forms the matrix again; and a chord step follows a full one only
+        // when the iterations are in their contracting regime (a full-length step
+        // smaller than the one before it by that factor)
+        chord_ok = rel <= CHORD_MIN_CONTRACTION * last_rel
+            && (chord || (alpha == 1.0 && last_full_length && last_rel.is_finite()));
         last_rel = rel;
+        last_full_length = alpha == 1.0;
         let rel_cost = (c - c_new).abs() / c.max(f64::MIN_POSITIVE);
         shared = s_new;
         eta = e_new;
