@@ -116,9 +116,9 @@ impl NoiseLevel {
         for k in 0..data.n_lines() {
             data.line_into(k, &mut line);
             for (e, g) in line.iter().enumerate() {
-                let a = g.norm();
-                if a > 0.0 && a.is_finite() {
-                    rel.push(self.variance[k * m + e].max(0.0).sqrt() / a);
+                let a2 = g.norm_sqr();
+                if a2 > 0.0 && a2.is_finite() {
+                    rel.push((self.variance[k * m + e].max(0.0) / a2).sqrt());
                 }
             }
         }

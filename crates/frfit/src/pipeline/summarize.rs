@@ -17,17 +17,21 @@ pub(crate) fn error_stats(data: &Frf, response: &ResponseGrid, noise: &NoiseLeve
     let mut rel = Vec::with_capacity(data.n_lines() * m);
     let mut chi = 0.0;
     let mut cnt = 0usize;
+    // squared magnitudes throughout (no `hypot` per value, a third of this function's
+    // time on the wafer stage): the quantiles of the squared ratios are the squares of
+    // the ratios' quantiles
     for k in 0..data.n_lines() {
         let g = data.line(k);
         let p = response.line(k);
         for e in 0..m {
-            let d = (g[e] - p[e]).norm();
-            if g[e].norm() > 0.0 {
-                rel.push(d / g[e].norm());
+            let d2 = (g[e] - p[e]).norm_sqr();
+            let g2 = g[e].norm_sqr();
+            if g2 > 0.0 {
+                rel.push(d2 / g2);
             }
             let v = noise.variance[k * m + e];
             if v > 0.0 && v.is_finite() {
-                chi += d * d / v;
+                chi += d2 / v;
                 cnt += 1;
             }
         }
@@ -46,7 +50,7 @@ pub(crate) fn error_stats(data: &Frf, response: &ResponseGrid, noise: &NoiseLeve
         } else {
             *below.select_nth_unstable_by(i50, |a, b| a.total_cmp(b)).1
         };
-        (median, p95)
+        (median.sqrt(), p95.sqrt())
     };
     ErrorStats {
         median_rel,
