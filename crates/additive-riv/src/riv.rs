@@ -3,7 +3,7 @@
 //! maximum-likelihood weighting when the data carry a variance.
 
 use crate::problem::{cost, groups, pack, unpack, Basis, FitData, Layout};
-use crate::step::{chord_step, step_keeping, IvMethod, StepFactors, StepSolver};
+use crate::step::{chord_step, step_keeping, IvMethod, StepFactors, StepInputs, StepSolver};
 use crate::{AdditiveModel, RivError};
 use frf_data::C64;
 use frf_data::{Convergence, Estimator, Fit, FrfDataset, ModelStructure, ProgressSink, Weighting};
@@ -402,31 +402,20 @@ fn iterate_core(
                     && c >= (1.0 - CHORD_MAX_COST_FALL) * w.cost
             });
         let (upd, alpha, accepted) = loop {
+            let inputs = StepInputs {
+                data,
+                lay: &lay,
+                subs: &subs,
+                basis: &basis,
+                eta: &eta,
+                method,
+                parallel: cfg.parallel,
+            };
             let upd = if chord {
                 let w = warm.as_ref().expect("checked above");
-                chord_step(
-                    data,
-                    &lay,
-                    &subs,
-                    &basis,
-                    &eta,
-                    method,
-                    cfg.parallel,
-                    &w.factors,
-                )
+                chord_step(&inputs, &w.factors)
             } else {
-                step_keeping(
-                    data,
-                    &lay,
-                    &subs,
-                    &basis,
-                    &eta,
-                    method,
-                    cfg.solver,
-                    cfg.parallel,
-                    keep,
-                )
-                .map(|(u, f)| {
+                step_keeping(&inputs, cfg.solver, keep).map(|(u, f)| {
                     *warm = f.map(|factors| WarmFactors {
                         factors,
                         method,

@@ -65,6 +65,61 @@ pub struct StepUpdate {
     pub cond_numerator: f64,
 }
 
+/// What a step reads: the data, the layout, the model's current basis and numerators.
+#[derive(Clone, Copy)]
+pub struct StepInputs<'a> {
+    /// The prepared data.
+    pub data: &'a FitData,
+    /// The parameter layout.
+    pub lay: &'a Layout,
+    /// `(numerator count, denominator count)` per submodel.
+    pub subs: &'a [(usize, usize)],
+    /// The basis at the current parameters.
+    pub basis: &'a Basis,
+    /// The current numerators (`eta` layout).
+    pub eta: &'a [f64],
+    /// Refined IV or SK.
+    pub method: IvMethod,
+    /// Entries on the rayon pool.
+    pub parallel: bool,
+}
+
+/// The sizes of a step's problem and its submodels' parameter groups.
+struct StepShape {
+    /// Lines.
+    n: usize,
+    /// Entries.
+    m: usize,
+    /// Numerator parameters per entry.
+    nn: usize,
+    /// Shared parameters.
+    ns: usize,
+    /// `(first numerator index, count)` per submodel.
+    ng: Vec<(usize, usize)>,
+    /// `(first denominator index, count)` per submodel.
+    dg: Vec<(usize, usize)>,
+}
+
+impl StepInputs<'_> {
+    /// The sizes and groups of the problem.
+    fn shape(&self) -> StepShape {
+        StepShape {
+            n: self.data.n,
+            m: self.data.m(),
+            nn: self.lay.n_num,
+            ns: self.lay.n_shared(),
+            ng: num_groups(self.subs, self.lay),
+            dg: den_groups(self.subs, self.lay),
+        }
+    }
+
+    /// Entry `e`'s numerators.
+    fn be(&self, e: usize) -> &[f64] {
+        let nn = self.lay.n_num;
+        &self.eta[e * nn..(e + 1) * nn]
+    }
+}
+
 /// Fills the real instrument `Y = [U | V_hat]` and the regressor's other columns
 /// `X' = [V | eps]` (the full regressor is `[U | V | eps]`: its `U` is `Y`'s) of
 /// entry `e` for the lines `lines = k0..k1` (rows `k - k0`: real parts of line `k`;
@@ -77,87 +132,70 @@ pub struct StepUpdate {
 ///
 /// The loops are compiled for the SIMD instruction set of the CPU at run time
 /// (`pulp` dispatch: AVX2 or AVX-512 where present, the baseline otherwise).
+/// `den_groups` is [`den_groups`] of the inputs' submodels.
+#[allow(clippy::too_many_arguments)]
 fn fill_entry(
+    inp: &StepInputs,
+    den_groups: &[(usize, usize)],
     e: usize,
     lines: std::ops::Range<usize>,
-    data: &FitData,
-    lay: &Layout,
-    den_groups: &[(usize, usize)],
-    basis: &Basis,
     el: &EntryLines,
-    method: IvMethod,
-    be: &[f64],
     regressor: bool,
     y: &mut Mat<f64>,
     x: &mut Mat<f64>,
 ) {
-    /// The arguments, so that `with_simd` (inlined into pulp's `target_feature`
-    /// function) runs the kernel with the CPU's instruction set.
-    struct Op<'a> {
-        e: usize,
-        lines: std::ops::Range<usize>,
-        data: &'a FitData,
-        lay: &'a Layout,
-        den_groups: &'a [(usize, usize)],
-        basis: &'a Basis,
-        el: &'a EntryLines,
-        method: IvMethod,
-        be: &'a [f64],
-        regressor: bool,
-        y: &'a mut Mat<f64>,
-        x: &'a mut Mat<f64>,
-    }
-    impl pulp::WithSimd for Op<'_> {
-        type Output = ();
-        #[inline(always)]
-        fn with_simd<S: pulp::Simd>(self, _simd: S) {
-            fill_entry_kernel(
-                self.e,
-                self.lines,
-                self.data,
-                self.lay,
-                self.den_groups,
-                self.basis,
-                self.el,
-                self.method,
-                self.be,
-                self.regressor,
-                self.y,
-                self.x,
-            )
-        }
-    }
-    pulp::Arch::new().dispatch(Op {
+    pulp::Arch::new().dispatch(FillOp {
+        inp,
+        den_groups,
         e,
         lines,
-        data,
-        lay,
-        den_groups,
-        basis,
         el,
-        method,
-        be,
         regressor,
         y,
         x,
     })
 }
 
-#[inline(always)]
-fn fill_entry_kernel(
+/// The arguments, so that `with_simd` (inlined into pulp's `target_feature`
+/// function) runs the kernel with the CPU's instruction set.
+struct FillOp<'a, 'b> {
+    inp: &'a StepInputs<'b>,
+    den_groups: &'a [(usize, usize)],
     e: usize,
     lines: std::ops::Range<usize>,
-    data: &FitData,
-    lay: &Layout,
-    den_groups: &[(usize, usize)],
-    basis: &Basis,
-    el: &EntryLines,
-    method: IvMethod,
-    be: &[f64],
+    el: &'a EntryLines,
     regressor: bool,
-    y: &mut Mat<f64>,
-    x: &mut Mat<f64>,
-) {
+    y: &'a mut Mat<f64>,
+    x: &'a mut Mat<f64>,
+}
+impl pulp::WithSimd for FillOp<'_, '_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        fill_entry_kernel(self)
+    }
+}
+
+#[inline(always)]
+fn fill_entry_kernel(op: FillOp) {
+    let FillOp {
+        inp,
+        den_groups,
+        e,
+        lines,
+        el,
+        regressor,
+        y,
+        x,
+    } = op;
+    let StepInputs {
+        data,
+        lay,
+        basis,
+        method,
+        ..
+    } = *inp;
+    let be = inp.be(e);
     // the regressor's columns (all but `eps`) are needed by a full step and by SK,
     // whose instrument they are
     let regressor = regressor || method == IvMethod::Sk;
@@ -302,6 +340,47 @@ fn num_groups(model_subs: &[(usize, usize)], lay: &Layout) -> Vec<(usize, usize)
         .collect()
 }
 
+/// Fills entry `e`'s instrument and regressor ([`fill_entry`]) a block of
+/// [`LINE_BLOCK`] lines at a time and hands each block to `accumulate(rows, acc, y, x)`
+/// (`rows` filled rows; `acc` replaces on the first block and adds on the others), so
+/// that the products over all lines are accumulated from blocks that stay in cache.
+fn for_each_line_block(
+    inp: &StepInputs,
+    den_groups: &[(usize, usize)],
+    e: usize,
+    el: &EntryLines,
+    regressor: bool,
+    (y, x): (&mut Mat<f64>, &mut Mat<f64>),
+    mut accumulate: impl FnMut(usize, Accum, &Mat<f64>, &Mat<f64>),
+) {
+    let n = inp.data.n;
+    for (b, k0) in (0..n).step_by(LINE_BLOCK).enumerate() {
+        let k1 = (k0 + LINE_BLOCK).min(n);
+        fill_entry(inp, den_groups, e, k0..k1, el, regressor, y, x);
+        let acc = if b == 0 { Accum::Replace } else { Accum::Add };
+        accumulate(2 * (k1 - k0), acc, y, x);
+    }
+}
+
+/// `per_entry(e, buffers)` for the `m` entries in order, on the rayon pool when
+/// `parallel` (one set of buffers from `init` per worker).
+fn map_entries<B, T: Send>(
+    m: usize,
+    parallel: bool,
+    init: impl Fn() -> B + Sync + Send,
+    per_entry: impl Fn(usize, &mut B) -> Result<T, RivError> + Sync + Send,
+) -> Result<Vec<T>, RivError> {
+    if parallel && m > 1 {
+        (0..m)
+            .into_par_iter()
+            .map_init(init, |b, e| per_entry(e, b))
+            .collect()
+    } else {
+        let mut b = init();
+        (0..m).map(|e| per_entry(e, &mut b)).collect()
+    }
+}
+
 /// Per-entry result of the elimination.
 struct EntryParts {
     /// `K_e = H_nn^{-1} H_ns`, column-major `nn x ns`.
@@ -368,6 +447,7 @@ impl StepFactors {
 /// Computes the update of one step of Algorithm 1.
 ///
 /// `subs` lists `(numerator count, denominator count)` per submodel.
+#[allow(clippy::too_many_arguments)]
 pub fn step(
     data: &FitData,
     lay: &Layout,
@@ -378,28 +458,28 @@ pub fn step(
     solver: StepSolver,
     parallel: bool,
 ) -> Result<StepUpdate, RivError> {
-    step_keeping(data, lay, subs, basis, eta, method, solver, parallel, false).map(|r| r.0)
+    let inputs = StepInputs {
+        data,
+        lay,
+        subs,
+        basis,
+        eta,
+        method,
+        parallel,
+    };
+    step_keeping(&inputs, solver, false).map(|r| r.0)
 }
 
 /// [`step`], also returning the factors a [`chord_step`] reuses when `keep` is set and
 /// the solver is the structured one.
-#[allow(clippy::too_many_arguments)]
 pub fn step_keeping(
-    data: &FitData,
-    lay: &Layout,
-    subs: &[(usize, usize)],
-    basis: &Basis,
-    eta: &[f64],
-    method: IvMethod,
+    inputs: &StepInputs,
     solver: StepSolver,
-    parallel: bool,
     keep: bool,
 ) -> Result<(StepUpdate, Option<StepFactors>), RivError> {
     match solver {
-        StepSolver::Structured => {
-            step_structured(data, lay, subs, basis, eta, method, parallel, keep)
-        }
-        StepSolver::Dense => Ok((step_dense(data, lay, subs, basis, eta, method)?, None)),
+        StepSolver::Structured => step_structured(inputs, keep),
+        StepSolver::Dense => Ok((step_dense(inputs)?, None)),
     }
 }
 
@@ -408,23 +488,19 @@ pub fn step_keeping(
 /// the whole `2n`-row matrices first and multiplying them after is bound by memory.
 const LINE_BLOCK: usize = 256;
 
-#[allow(clippy::too_many_arguments)]
 fn step_structured(
-    data: &FitData,
-    lay: &Layout,
-    subs: &[(usize, usize)],
-    basis: &Basis,
-    eta: &[f64],
-    method: IvMethod,
-    parallel: bool,
+    inp: &StepInputs,
     keep: bool,
 ) -> Result<(StepUpdate, Option<StepFactors>), RivError> {
-    let n = data.n;
-    let m = data.m();
-    let nn = lay.n_num;
-    let ns = lay.n_shared();
-    let ng = num_groups(subs, lay);
-    let dg = den_groups(subs, lay);
+    let StepShape {
+        n,
+        m,
+        nn,
+        ns,
+        ng,
+        dg,
+    } = inp.shape();
+    let (data, basis, parallel) = (inp.data, inp.basis, inp.parallel);
     // the numerator blocks U^T S_e^2 U of all entries from the basis products they
     // share (crate::gram); the rest of Y_e^T X_e per entry
     let s2 = crate::gram::squared_scales(&data.sqrt_w, basis, m);
@@ -433,28 +509,10 @@ fn step_structured(
     type Bufs = (Mat<f64>, Mat<f64>, Mat<f64>, Mat<f64>, EntryLines);
     let per_entry = |e: usize, bufs: &mut Bufs| -> Result<EntryParts, RivError> {
         let (y, x, zr, zl, el) = bufs;
-        el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
+        el.fill(e, data, basis, &ng, inp.be(e));
         // Y^T X with Y = [U | V_hat], X = [U | X']: the left block column is U^T U
-        // (from `grams`) over V_hat^T U (`zl`), the right one Y^T X' (`zr`),
-        // accumulated over blocks of lines that stay in cache
-        for (b, k0) in (0..n).step_by(LINE_BLOCK).enumerate() {
-            let k1 = (k0 + LINE_BLOCK).min(n);
-            let rows = 2 * (k1 - k0);
-            fill_entry(
-                e,
-                k0..k1,
-                data,
-                lay,
-                &dg,
-                basis,
-                el,
-                method,
-                &eta[e * nn..(e + 1) * nn],
-                true,
-                y,
-                x,
-            );
-            let acc = if b == 0 { Accum::Replace } else { Accum::Add };
+        // (from `grams`) over V_hat^T U (`zl`), the right one Y^T X' (`zr`)
+        for_each_line_block(inp, &dg, e, el, true, (y, x), |rows, acc, y, x| {
             let yb = y.as_ref().subrows(0, rows);
             matmul(
                 zr.as_mut(),
@@ -472,7 +530,7 @@ fn step_structured(
                 1.0,
                 Par::Seq,
             );
-        }
+        });
         let mut h_nn = grams[e * nn * nn..(e + 1) * nn * nn].to_vec();
         // rhs: [H_ns | g_n]
         let mut rhs = vec![0.0; nn * (ns + 1)];
@@ -541,17 +599,7 @@ fn step_structured(
             EntryLines::default(),
         )
     };
-    let parts: Vec<EntryParts> = if parallel && m > 1 {
-        (0..m)
-            .into_par_iter()
-            .map_init(init, |b, e| per_entry(e, b))
-            .collect::<Result<_, _>>()?
-    } else {
-        let mut b = init();
-        (0..m)
-            .map(|e| per_entry(e, &mut b))
-            .collect::<Result<_, _>>()?
-    };
+    let parts: Vec<EntryParts> = map_entries(m, parallel, init, per_entry)?;
     let mut s = Mat::<f64>::zeros(ns, ns);
     let mut r = vec![0.0; ns];
     let mut cond_num = 1.0f64;
@@ -627,21 +675,16 @@ fn back_substitute(k_vec: &[f64], k_mat: &[f64], d_shared: &[f64], out: &mut [f6
 /// [`step_keeping`]) and the right-hand side `Y^T eps` of the current one: the chord
 /// method (see [`StepFactors`]). Its fixed point is that of [`step`]; its cost is the
 /// instrument's fill and one product with the residual per entry.
-#[allow(clippy::too_many_arguments)]
-pub fn chord_step(
-    data: &FitData,
-    lay: &Layout,
-    subs: &[(usize, usize)],
-    basis: &Basis,
-    eta: &[f64],
-    method: IvMethod,
-    parallel: bool,
-    factors: &StepFactors,
-) -> Result<StepUpdate, RivError> {
-    let n = data.n;
-    let m = data.m();
-    let nn = lay.n_num;
-    let ns = lay.n_shared();
+pub fn chord_step(inp: &StepInputs, factors: &StepFactors) -> Result<StepUpdate, RivError> {
+    let StepShape {
+        n,
+        m,
+        nn,
+        ns,
+        ng,
+        dg,
+    } = inp.shape();
+    let (data, lay, basis, parallel) = (inp.data, inp.lay, inp.basis, inp.parallel);
     if !factors.fits(lay, m) {
         return Err(RivError::invalid(
             "step factors",
@@ -654,40 +697,18 @@ pub fn chord_step(
             format!("the problem is {m} x ({nn} + {ns})"),
         ));
     }
-    let ng = num_groups(subs, lay);
-    let dg = den_groups(subs, lay);
     type Bufs = (Mat<f64>, Mat<f64>, Mat<f64>, EntryLines);
     // per entry: k_e = H_nn^{-1} g_n and r_e = g_s - H_sn k_e
-    let per_entry = |e: usize, bufs: &mut Bufs| -> (Vec<f64>, Vec<f64>) {
+    let per_entry = |e: usize, bufs: &mut Bufs| -> Result<(Vec<f64>, Vec<f64>), RivError> {
         let (y, x, g, el) = bufs;
-        el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        for (b, k0) in (0..n).step_by(LINE_BLOCK).enumerate() {
-            let k1 = (k0 + LINE_BLOCK).min(n);
-            let rows = 2 * (k1 - k0);
-            fill_entry(
-                e,
-                k0..k1,
-                data,
-                lay,
-                &dg,
-                basis,
-                el,
-                method,
-                &eta[e * nn..(e + 1) * nn],
-                false,
-                y,
-                x,
-            );
-            let acc = if b == 0 { Accum::Replace } else { Accum::Add };
-            matmul(
-                g.as_mut(),
-                acc,
-                y.as_ref().subrows(0, rows).transpose(),
+        el.fill(e, data, basis, &ng, inp.be(e));
+        for_each_line_block(inp, &dg, e, el, false, (y, x), |rows, acc, y, x| {
+            let (yb, eps) = (
+                y.as_ref().subrows(0, rows),
                 x.as_ref().subrows(0, rows).subcols(ns, 1),
-                1.0,
-                Par::Seq,
             );
-        }
+            matmul(g.as_mut(), acc, yb.transpose(), eps, 1.0, Par::Seq);
+        });
         let ef = &factors.entries[e];
         let h_sn = &ef.h_sn;
         let mut k: Vec<f64> = (0..nn).map(|i| g[(i, 0)]).collect();
@@ -701,7 +722,7 @@ pub fn chord_step(
                 v
             })
             .collect();
-        (k, r)
+        Ok((k, r))
     };
     let init = || -> Bufs {
         (
@@ -711,15 +732,7 @@ pub fn chord_step(
             EntryLines::default(),
         )
     };
-    let parts: Vec<(Vec<f64>, Vec<f64>)> = if parallel && m > 1 {
-        (0..m)
-            .into_par_iter()
-            .map_init(init, |b, e| per_entry(e, b))
-            .collect()
-    } else {
-        let mut b = init();
-        (0..m).map(|e| per_entry(e, &mut b)).collect()
-    };
+    let parts: Vec<(Vec<f64>, Vec<f64>)> = map_entries(m, parallel, init, per_entry)?;
     let mut r = vec![0.0; ns];
     for (_, re) in &parts {
         for (ri, v) in r.iter_mut().zip(re) {
@@ -754,21 +767,17 @@ pub fn chord_step(
 /// The dense reference: forms the full `(ns + m nn)` square system from the same
 /// columns (entries stacked), and solves it by an equilibrated LU. For small problems
 /// and tests only: its cost grows with the square of `m nn`.
-fn step_dense(
-    data: &FitData,
-    lay: &Layout,
-    subs: &[(usize, usize)],
-    basis: &Basis,
-    eta: &[f64],
-    method: IvMethod,
-) -> Result<StepUpdate, RivError> {
-    let n = data.n;
-    let m = data.m();
-    let nn = lay.n_num;
-    let ns = lay.n_shared();
+fn step_dense(inp: &StepInputs) -> Result<StepUpdate, RivError> {
+    let StepShape {
+        n,
+        m,
+        nn,
+        ns,
+        ng,
+        dg,
+    } = inp.shape();
+    let (data, basis, eta) = (inp.data, inp.basis, inp.eta);
     let ptot = ns + m * nn;
-    let ng = num_groups(subs, lay);
-    let dg = den_groups(subs, lay);
     // Full instrument and regressor: rows 2n per entry, columns [shared | eta_0 | ..].
     let mut yf = Mat::<f64>::zeros(2 * n * m, ptot);
     let mut xf = Mat::<f64>::zeros(2 * n * m, ptot + 1);
@@ -777,20 +786,7 @@ fn step_dense(
     let mut el = EntryLines::default();
     for e in 0..m {
         el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
-        fill_entry(
-            e,
-            0..n,
-            data,
-            lay,
-            &dg,
-            basis,
-            &el,
-            method,
-            &eta[e * nn..(e + 1) * nn],
-            true,
-            &mut y,
-            &mut x,
-        );
+        fill_entry(inp, &dg, e, 0..n, &el, true, &mut y, &mut x);
         for row in 0..2 * n {
             let rr = e * 2 * n + row;
             for c in 0..ns {
