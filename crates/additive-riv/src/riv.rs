@@ -230,11 +230,8 @@ impl WarmFactors {
         shared: &[f64],
         eta: &[f64],
     ) -> Option<f64> {
-        if method != self.method
-            || !self.factors.fits(lay, m)
-            || shared.len() != self.shared.len()
-            || eta.len() != self.eta.len()
-        {
+        // the same layout means the same lengths of `shared` and `eta`
+        if method != self.method || !self.factors.fits(lay, m) {
             return None;
         }
         let ds: Vec<f64> = shared

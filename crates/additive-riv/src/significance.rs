@@ -88,12 +88,7 @@ pub fn submodel_cost_increase(model: &AdditiveModel, data: &FitData) -> Result<V
     let m = data.m();
     let basis = Basis::new(model, &lay, &data.omega);
     let (_, eta) = pack(model, &lay);
-    let groups: Vec<(usize, usize)> = model
-        .submodels
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (lay.num_offset[i], s.num.len()))
-        .collect();
+    let groups = crate::problem::groups(model, &lay);
     let n = data.n;
     // the Gram matrices U^T S_e^2 U of the entries from the basis products they share
     // (crate::gram), a chunk of entries at a time so that they hold at most

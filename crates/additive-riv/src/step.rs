@@ -393,9 +393,8 @@ struct EntryParts {
     r_vec: Vec<f64>,
     cond: f64,
     /// What a chord step reuses (when asked for): the factor of `H_nn`
-    /// ([`spd_factor`]: `L` and the equilibration) and `H_sn = V_hat^T U` (`ns x nn`,
-    /// column-major).
-    kept: Option<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+    /// ([`spd_factor`]: `L` and the equilibration) and `H_sn = V_hat^T U` (`ns x nn`).
+    kept: Option<(Vec<f64>, Vec<f64>, Mat<f64>)>,
 }
 
 /// The per-entry eliminations and the shared Schur system of one full step, kept so
@@ -416,6 +415,8 @@ pub struct StepFactors {
     entries: Vec<EntryFactor>,
     /// The Schur system `sum_e H_ss - H_sn K_e`.
     schur: Mat<f64>,
+    /// The worst condition estimate of the entries' `H_nn` ([`StepUpdate::cond_numerator`]).
+    cond_numerator: f64,
 }
 
 /// One entry's part of [`StepFactors`] (column-major matrices).
@@ -428,7 +429,7 @@ struct EntryFactor {
     /// `K_e = H_nn^{-1} H_ns` (`nn x ns`).
     k_mat: Vec<f64>,
     /// `H_sn = V_hat^T U` (`ns x nn`).
-    h_sn: Vec<f64>,
+    h_sn: Mat<f64>,
 }
 
 impl StepFactors {
@@ -553,7 +554,6 @@ fn step_structured(
         spd_apply(&h_nn, &h_d, nn, &mut rhs, ns + 1);
         // S_e = H_ss - H_sn K ; r_e = g_s - H_sn k
         let mut s_mat = vec![0.0; ns * ns];
-        let mut r_vec = vec![0.0; ns];
         for c in 0..ns {
             for r in 0..ns {
                 let mut v = zr[(nn + r, c)];
@@ -563,24 +563,10 @@ fn step_structured(
                 s_mat[c * ns + r] = v;
             }
         }
-        for r in 0..ns {
-            let mut v = zr[(nn + r, ns)];
-            for t in 0..nn {
-                v -= zl[(r, t)] * rhs[ns * nn + t];
-            }
-            r_vec[r] = v;
-        }
         let k_vec = rhs[ns * nn..].to_vec();
+        let r_vec = schur_rhs(zl, |r| zr[(nn + r, ns)], &k_vec);
         rhs.truncate(ns * nn);
-        let kept = keep.then(|| {
-            let mut h_sn = vec![0.0; ns * nn];
-            for t in 0..nn {
-                for r in 0..ns {
-                    h_sn[t * ns + r] = zl[(r, t)];
-                }
-            }
-            (h_nn, h_d, h_sn)
-        });
+        let kept = keep.then(|| (h_nn, h_d, zl.clone()));
         Ok(EntryParts {
             k_mat: rhs,
             k_vec,
@@ -655,8 +641,23 @@ fn step_structured(
             })
             .collect(),
         schur: s,
+        cond_numerator: cond_num,
     });
     Ok((update, factors))
+}
+
+/// `r_e = g_s - H_sn k_e`: the entry's right-hand side of the shared (Schur) system,
+/// with `g_s(r)` the shared rows of `Y^T eps` and `k_e = H_nn^{-1} g_n`.
+fn schur_rhs(h_sn: &Mat<f64>, g_s: impl Fn(usize) -> f64, k: &[f64]) -> Vec<f64> {
+    (0..h_sn.nrows())
+        .map(|r| {
+            let mut v = g_s(r);
+            for (t, kt) in k.iter().enumerate() {
+                v -= h_sn[(r, t)] * kt;
+            }
+            v
+        })
+        .collect()
 }
 
 /// `d_eta_e = k_e - K_e d_shared` (the back-substitution of the eliminated numerators).
@@ -710,18 +711,9 @@ pub fn chord_step(inp: &StepInputs, factors: &StepFactors) -> Result<StepUpdate,
             matmul(g.as_mut(), acc, yb.transpose(), eps, 1.0, Par::Seq);
         });
         let ef = &factors.entries[e];
-        let h_sn = &ef.h_sn;
         let mut k: Vec<f64> = (0..nn).map(|i| g[(i, 0)]).collect();
         spd_apply(&ef.l, &ef.d, nn, &mut k, 1);
-        let r: Vec<f64> = (0..ns)
-            .map(|row| {
-                let mut v = g[(nn + row, 0)];
-                for (t, kt) in k.iter().enumerate() {
-                    v -= h_sn[t * ns + row] * kt;
-                }
-                v
-            })
-            .collect();
+        let r = schur_rhs(&ef.h_sn, |row| g[(nn + row, 0)], &k);
         Ok((k, r))
     };
     let init = || -> Bufs {
@@ -760,7 +752,7 @@ pub fn chord_step(inp: &StepInputs, factors: &StepFactors) -> Result<StepUpdate,
         d_shared,
         d_eta,
         cond_shared,
-        cond_numerator: 1.0,
+        cond_numerator: factors.cond_numerator,
     })
 }
 
@@ -776,7 +768,7 @@ fn step_dense(inp: &StepInputs) -> Result<StepUpdate, RivError> {
         ng,
         dg,
     } = inp.shape();
-    let (data, basis, eta) = (inp.data, inp.basis, inp.eta);
+    let (data, basis) = (inp.data, inp.basis);
     let ptot = ns + m * nn;
     // Full instrument and regressor: rows 2n per entry, columns [shared | eta_0 | ..].
     let mut yf = Mat::<f64>::zeros(2 * n * m, ptot);
@@ -785,7 +777,7 @@ fn step_dense(inp: &StepInputs) -> Result<StepUpdate, RivError> {
     let mut x = Mat::<f64>::zeros(2 * n, ns + 1);
     let mut el = EntryLines::default();
     for e in 0..m {
-        el.fill(e, data, basis, &ng, &eta[e * nn..(e + 1) * nn]);
+        el.fill(e, data, basis, &ng, inp.be(e));
         fill_entry(inp, &dg, e, 0..n, &el, true, &mut y, &mut x);
         for row in 0..2 * n {
             let rr = e * 2 * n + row;
