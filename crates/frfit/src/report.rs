@@ -290,6 +290,15 @@ fn write_text(path: &Path, text: &str) -> Result<(), FrfitError> {
     std::fs::write(path, text).map_err(|e| FrfitError::io(path, e))
 }
 
+/// The "added" cell of a diagnosis step: `yes`, `no`, or `yes, removed at step N` for
+/// a factor a later step took out of the model.
+fn added_cell(t: &crate::summary::StepSummary) -> String {
+    match (t.accepted, t.superseded_by) {
+        (true, Some(n)) => format!("yes, removed at step {n}"),
+        (true, None) => "yes".into(),
+        (false, _) => "no".into(),
+    }
+}
 fn plural(n: usize) -> &'static str {
     if n == 1 {
         ""
@@ -1204,11 +1213,21 @@ fn markdown(
         );
     } else {
         let accepted = s.steps.iter().filter(|t| t.accepted).count();
+        let removed = s
+            .steps
+            .iter()
+            .filter(|t| t.accepted && t.superseded_by.is_some())
+            .count();
+        let removed = if removed > 0 {
+            format!(" ({removed} of them taken out again by a later step)")
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             md,
-            "{} candidate effect{} tested, {accepted} added to the model. An effect is added \
-             when its F statistic (the cost it explains per added parameter over the noise \
-             scale) passes the critical value.\n",
+            "{} candidate effect{} tested, {accepted} added to the model{removed}. An effect \
+             is added when its F statistic (the cost it explains per added parameter over \
+             the noise scale) passes the critical value.\n",
             s.steps.len(),
             plural(s.steps.len())
         );
@@ -1225,7 +1244,7 @@ fn markdown(
                 "| {} | {} | {} | {} | {} | {} ({}, {} param{}) | {} | {} | {} |",
                 i + 1,
                 cell(&t.effect),
-                if t.accepted { "yes" } else { "no" },
+                added_cell(t),
                 cell(t.evidence.trim()),
                 cell(if params.is_empty() { "none" } else { &params }),
                 fmt_num(t.f_statistic),
@@ -1245,7 +1264,11 @@ fn markdown(
                 "### Step {}: {} ({})\n",
                 i + 1,
                 t.effect,
-                if t.accepted { "accepted" } else { "rejected" }
+                match (t.accepted, t.superseded_by) {
+                    (true, Some(n)) => format!("accepted, removed at step {n}"),
+                    (true, None) => "accepted".into(),
+                    (false, _) => "rejected".into(),
+                }
             );
             let _ = writeln!(md, "{}\n", t.evidence.trim());
             let params = fmt_params(&t.params, t.uncertainty.as_ref());

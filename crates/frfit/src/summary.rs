@@ -170,6 +170,11 @@ pub struct StepSummary {
     pub after: ErrorStats,
     /// SVG of the residual before and after, relative to the report directory.
     pub figure: Option<String>,
+    /// For an accepted dynamics factor that a later accepted step took out of the model
+    /// (a factor accepted for want of the right effect, left redundant once that effect
+    /// was in, or replaced by its rational twin): that step's number (1-based).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub superseded_by: Option<usize>,
 }
 
 /// The final model, briefly.

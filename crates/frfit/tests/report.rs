@@ -211,6 +211,7 @@ fn two_steps() -> Vec<StepSummary> {
             before: errors(0.12, 3.4, 25.0),
             after: errors(0.008, 0.021, 1.02),
             figure: None,
+            superseded_by: None,
         },
         StepSummary {
             effect: "delay".into(),
@@ -224,6 +225,7 @@ fn two_steps() -> Vec<StepSummary> {
             before: errors(0.008, 0.021, 1.02),
             after: errors(0.008, 0.021, 1.019),
             figure: Some("delay_step.svg".into()),
+            superseded_by: None,
         },
     ]
 }
@@ -588,4 +590,46 @@ fn wafer_report() {
     if std::env::var_os("FRFIT_REPORT_DIR").is_none() {
         cleanup(&dir);
     }
+}
+
+/// A step whose factor a later step took out of the model says so in the table and in
+/// its section.
+#[test]
+fn a_superseded_step_is_marked() {
+    let (data, truth_g, var) = synthetic(2, 3, 50);
+    let c = cmif(&data).unwrap();
+    let mut steps = two_steps();
+    steps[0].superseded_by = Some(2);
+    let s = summary(&data, steps, Some(0.01));
+    let responses = vec![
+        (truth_g.clone(), truth_g.clone()),
+        (truth_g.clone(), truth_g.clone()),
+    ];
+    let input = ReportInput {
+        data: &data,
+        noise_var: Some(&var),
+        cmif: &c,
+        peaks: &[],
+        initial: &truth_g,
+        final_model: &truth_g,
+        steps: &responses,
+        title: "x",
+    };
+    let dir = temp_dir("superseded");
+    let files = write_report(&dir, &input, &s).unwrap();
+    let md = check_files(&dir, &files);
+    assert!(
+        md.contains("| 1 | missed_mode | yes, removed at step 2 |"),
+        "{md}"
+    );
+    assert!(
+        md.contains("### Step 1: missed_mode (accepted, removed at step 2)"),
+        "{md}"
+    );
+    assert!(md.contains("### Step 2: delay (rejected)"), "{md}");
+    assert!(
+        md.contains("1 added to the model (1 of them taken out again by a later step)"),
+        "{md}"
+    );
+    cleanup(&dir);
 }

@@ -89,6 +89,41 @@ struct State {
     /// The cost increase over the first fit that the accepted suspended-body readings
     /// ([`suspension_reading`]) were allowed: the simpler model fits a little worse.
     allowed_increase: f64,
+    /// Per dynamics factor of `model`, the index in the steps of the accepted step that
+    /// added it (`None`: it came with the first fit).
+    factor_steps: Vec<Option<usize>>,
+}
+
+/// The factor steps of `accepted` (the model of the step at index `step`) from those of
+/// `before` (`factor_steps`, one per factor of `before`), and the steps whose factor
+/// `accepted` no longer holds. Factors are matched by entries and orders (their
+/// coefficients move in every refit): each factor of `before` claims the first
+/// unclaimed factor of `accepted` with the same target and numerator and denominator
+/// orders; an unclaimed factor of `accepted` is the step's own.
+fn match_factors(
+    before: &AdditiveModel,
+    factor_steps: &[Option<usize>],
+    accepted: &AdditiveModel,
+    step: usize,
+) -> (Vec<Option<usize>>, Vec<usize>) {
+    let key = |d: &realize::DynamicsFactor| (d.target, d.den.len(), d.num.len());
+    let mut claimed: Vec<Option<Option<usize>>> = vec![None; accepted.dynamics.len()];
+    let mut gone = Vec::new();
+    for (k, d) in before.dynamics.iter().enumerate() {
+        let origin = factor_steps.get(k).copied().flatten();
+        match (0..accepted.dynamics.len())
+            .find(|&j| claimed[j].is_none() && key(&accepted.dynamics[j]) == key(d))
+        {
+            // `Some(origin)`: claimed, whatever the origin
+            Some(j) => claimed[j] = Some(origin),
+            None => gone.extend(origin),
+        }
+    }
+    let steps = claimed
+        .into_iter()
+        .map(|c| c.unwrap_or(Some(step)))
+        .collect();
+    (steps, gone)
 }
 
 impl State {
@@ -145,6 +180,7 @@ pub fn diagnose(
         n_tests: 0,
         n_accepted: 0,
         allowed_increase: 0.0,
+        factor_steps: vec![None; fit.model.dynamics.len()],
     };
     let mut steps: Vec<StepSummary> = Vec::new();
     let mut step_responses = Vec::new();
@@ -184,6 +220,15 @@ pub fn diagnose(
         let Some((accepted, accepted_cost)) = accepted_model else {
             break;
         };
+        // the factors the accepted step took out of the model (redundant beside it, or
+        // replaced by their twin) are marked on the steps that added them
+        let step_index = steps.len() - 1;
+        let (factor_steps, gone) =
+            match_factors(&st.model, &st.factor_steps, &accepted, step_index);
+        for g in gone {
+            steps[g].superseded_by = Some(step_index + 1);
+        }
+        st.factor_steps = factor_steps;
         st.n_accepted += 1;
         let m = accept::prune(
             ctx,
@@ -193,7 +238,10 @@ pub fn diagnose(
             steps.len(),
             &mut fit.messages,
         )?;
-        st.cost = model_cost(&m, fd);
+        let cost = model_cost(&m, fd);
+        let (m, cost) =
+            accept::merge_twins(ctx, cfg, &riv, m, cost, steps.len(), &mut fit.messages)?;
+        st.cost = cost;
         st.response = m.response_at(&ctx.omega);
         st.model = m;
         st.reanalyze(ctx)?;
@@ -547,6 +595,7 @@ fn step_summaries(
         before,
         after,
         figure: None,
+        superseded_by: None,
     };
     if tr.joint_modes.is_empty() {
         return vec![step(&tr.params, tr.evidence.clone())];

@@ -339,7 +339,8 @@ pub fn assert_output_resonance(
     assert!((z / zeta - 1.0).abs() < 0.1, "damping {z:.4}, made {zeta}");
 }
 
-/// The accepted steps of `out` that add `effect`.
+/// The accepted steps of `out` that add `effect`, except those a later step took out of
+/// the model (`superseded_by`).
 pub fn accepted<'a>(
     out: &'a frfit::pipeline::PipelineOutput,
     effect: &str,
@@ -347,7 +348,7 @@ pub fn accepted<'a>(
     out.summary
         .steps
         .iter()
-        .filter(|s| s.accepted && s.effect == effect)
+        .filter(|s| s.accepted && s.superseded_by.is_none() && s.effect == effect)
         .collect()
 }
 
