@@ -92,6 +92,9 @@ struct State {
     /// Per dynamics factor of `model`, the index in the steps of the accepted step that
     /// added it (`None`: it came with the first fit).
     factor_steps: Vec<Option<usize>>,
+    /// The accepted step that made the delay a fitted parameter (its index in the steps)
+    /// and the delay before it, seconds.
+    delay_step: Option<(usize, f64)>,
 }
 
 /// The factor steps of `accepted` (the model of the step at index `step`) from those of
@@ -181,6 +184,7 @@ pub fn diagnose(
         n_accepted: 0,
         allowed_increase: 0.0,
         factor_steps: vec![None; fit.model.dynamics.len()],
+        delay_step: None,
     };
     let mut steps: Vec<StepSummary> = Vec::new();
     let mut step_responses = Vec::new();
@@ -212,17 +216,18 @@ pub fn diagnose(
         for (i, tr) in trials.into_iter().enumerate() {
             let accepted = Some(i) == best;
             let before = (&st.response, before);
+            // the index of the accepted trial's (first) step
+            let index = steps.len();
             record_trial(ctx, &tr, accepted, before, &mut steps, &mut step_responses);
             if accepted {
-                accepted_model = Some((tr.model, tr.cost));
+                accepted_model = Some((tr.model, tr.cost, index));
             }
         }
-        let Some((accepted, accepted_cost)) = accepted_model else {
+        let Some((accepted, accepted_cost, step_index)) = accepted_model else {
             break;
         };
         // the factors the accepted step took out of the model (redundant beside it, or
         // replaced by their twin) are marked on the steps that added them
-        let step_index = steps.len() - 1;
         let (factor_steps, gone) =
             match_factors(&st.model, &st.factor_steps, &accepted, step_index);
         for g in gone {
@@ -235,12 +240,49 @@ pub fn diagnose(
             cfg,
             accepted,
             accepted_cost,
-            steps.len(),
+            step_index + 1,
             &mut fit.messages,
         )?;
         let cost = model_cost(&m, fd);
         let (m, cost) =
-            accept::merge_twins(ctx, cfg, &riv, m, cost, steps.len(), &mut fit.messages)?;
+            accept::merge_twins(ctx, cfg, &riv, m, cost, step_index + 1, &mut fit.messages)?;
+        // the delay the step made free, from the value before it
+        if m.factor.fit_delay && !st.model.factor.fit_delay {
+            st.delay_step = Some((step_index, st.model.factor.delay_s));
+        }
+        // the effects of earlier steps, tested again beside this one
+        let mut earlier: Vec<(accept::Earlier, usize)> = st
+            .factor_steps
+            .iter()
+            .enumerate()
+            .filter_map(|(k, o)| {
+                o.filter(|&j| j < step_index)
+                    .map(|j| (accept::Earlier::Factor(k), j))
+            })
+            .collect();
+        if let Some((j, before_s)) = st.delay_step.filter(|&(j, _)| j < step_index) {
+            earlier.push((accept::Earlier::Delay { before_s }, j));
+        }
+        let (m, cost, dropped) = accept::drop_earlier(
+            ctx,
+            cfg,
+            &riv,
+            (m, cost),
+            &earlier,
+            step_index + 1,
+            &mut fit.messages,
+        )?;
+        for j in dropped {
+            steps[j].superseded_by = Some(step_index + 1);
+            match st.delay_step {
+                Some((d, _)) if d == j => st.delay_step = None,
+                _ => {
+                    if let Some(k) = st.factor_steps.iter().position(|&o| o == Some(j)) {
+                        st.factor_steps.remove(k);
+                    }
+                }
+            }
+        }
         st.cost = cost;
         st.response = m.response_at(&ctx.omega);
         st.model = m;

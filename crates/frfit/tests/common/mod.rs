@@ -291,9 +291,11 @@ pub fn print_steps(name: &str, out: &frfit::pipeline::PipelineOutput) {
     println!("{name}: initial {:?}", s.initial.errors);
     for st in &s.steps {
         println!(
-            "  {} accepted={} F={:.3} (crit {:.3}) {} median {:.3e} -> {:.3e}",
+            "  {} accepted={}{} F={:.3} (crit {:.3}) {} median {:.3e} -> {:.3e}",
             st.effect,
             st.accepted,
+            st.superseded_by
+                .map_or(String::new(), |n| format!(" (removed at step {n})")),
             st.f_statistic,
             st.f_critical,
             st.params,
