@@ -121,14 +121,14 @@ fn twin_pairs(model: &AdditiveModel) -> Vec<(usize, usize)> {
 /// had split one resonance into two (plate seed 8 with a sensor resonance 3 % above its
 /// fifth mode: 388.85 and 389.17 Hz, damping 0.0088 and 0.0092, beside the true
 /// 388.85 Hz). A genuine close pair (two shapes) fails the test and stays. What
-/// happened goes to `messages`, as after step `step`.
+/// happened goes to `messages`, prefixed by `when` ("after step 3").
 pub fn merge_twins(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     riv: &RivConfig,
     mut model: AdditiveModel,
     mut cost: f64,
-    step: usize,
+    when: &str,
     messages: &mut Vec<String>,
 ) -> Result<(AdditiveModel, f64), FrfitError> {
     let fd = &ctx.fit_data;
@@ -162,7 +162,7 @@ pub fn merge_twins(
         let stable = unstable_parts(&r.model) <= unstable_parts(&model);
         if r.cost.is_finite() && f <= f_crit && stable {
             messages.push(format!(
-                "after step {step}: merged the twin modes at {f_keep:.2} and {f_go:.2} Hz (within their half-power bandwidth): the mode at {f_go:.2} Hz is not significant beside the other refitted (F = {f:.2} <= {f_crit:.2})"
+                "{when}: merged the twin modes at {f_keep:.2} and {f_go:.2} Hz (within their half-power bandwidth): the mode at {f_go:.2} Hz is not significant beside the other refitted (F = {f:.2} <= {f_crit:.2})"
             ));
             // the pair's frequencies moved: test the others against the merged model
             tested.clear();

@@ -244,8 +244,15 @@ pub fn diagnose(
             &mut fit.messages,
         )?;
         let cost = model_cost(&m, fd);
-        let (m, cost) =
-            accept::merge_twins(ctx, cfg, &riv, m, cost, step_index + 1, &mut fit.messages)?;
+        let (m, cost) = accept::merge_twins(
+            ctx,
+            cfg,
+            &riv,
+            m,
+            cost,
+            &format!("after step {}", step_index + 1),
+            &mut fit.messages,
+        )?;
         // the delay the step made free, from the value before it
         if m.factor.fit_delay && !st.model.factor.fit_delay {
             st.delay_step = Some((step_index, st.model.factor.delay_s));
@@ -292,7 +299,17 @@ pub fn diagnose(
         suspension_reading(ctx, cfg, &riv, &mut st, &mut steps, &mut step_responses)?;
     }
     let t_final = std::time::Instant::now();
-    let fit = accept::final_refinement(ctx, cfg, fit, st.model, st.allowed_increase)?;
+    // twins the first fit left where no step was accepted after them
+    let (model, _) = accept::merge_twins(
+        ctx,
+        cfg,
+        &riv,
+        st.model,
+        st.cost,
+        "before the final refinement",
+        &mut fit.messages,
+    )?;
+    let fit = accept::final_refinement(ctx, cfg, fit, model, st.allowed_increase)?;
     stages.push((
         "diagnose: final refinement".into(),
         t_final.elapsed().as_secs_f64(),
