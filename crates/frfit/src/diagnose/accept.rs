@@ -79,6 +79,25 @@ pub fn prune(
     Ok(m)
 }
 
+/// `reduced`, a model nested in `model` (at cost `cost`) with some of its parts taken
+/// out, refitted (numerators, eq. 24, then Algorithm 1 at `riv`), with the F statistic
+/// of the parts taken out and its critical value ([`f_test`] at `cfg.alpha`) when they
+/// are not significant beside the rest and the refit adds no unstable part; `None` when
+/// they are significant, or the refit fails or adds an unstable part.
+fn insignificant_without(
+    cfg: &PipelineConfig,
+    fd: &additive_riv::FitData,
+    riv: &RivConfig,
+    (model, cost): (&AdditiveModel, f64),
+    reduced: AdditiveModel,
+) -> Option<(super::trial::Refitted, f64, f64)> {
+    let r = refit(reduced, fd, riv).ok()?;
+    let removed = model.n_params().saturating_sub(r.model.n_params()).max(1);
+    let (_, f, f_crit) = f_test(model, fd, r.cost, cost, removed, cfg);
+    let stable = unstable_parts(&r.model) <= unstable_parts(model);
+    (r.cost.is_finite() && f <= f_crit && stable).then_some((r, f, f_crit))
+}
+
 /// Two modes are twins when their poles are closer than this fraction of their mean
 /// `|Re p|`: within each other's half-power half-bandwidth, where two submodels can
 /// share one resonance between them (the pruning's duplicate test, at
@@ -154,13 +173,7 @@ pub fn merge_twins(
         let (f_keep, f_go) = (freq(&model, keep), freq(&model, go));
         let mut merged = model.clone();
         merged.remove_submodel(go);
-        let Ok(r) = refit(merged, fd, riv) else {
-            continue;
-        };
-        let removed = model.n_params().saturating_sub(r.model.n_params()).max(1);
-        let (_, f, f_crit) = f_test(&model, fd, r.cost, cost, removed, cfg);
-        let stable = unstable_parts(&r.model) <= unstable_parts(&model);
-        if r.cost.is_finite() && f <= f_crit && stable {
+        if let Some((r, f, f_crit)) = insignificant_without(cfg, fd, riv, (&model, cost), merged) {
             messages.push(format!(
                 "{when}: merged the twin modes at {f_keep:.2} and {f_go:.2} Hz (within their half-power bandwidth): the mode at {f_go:.2} Hz is not significant beside the other refitted (F = {f:.2} <= {f_crit:.2})"
             ));
@@ -242,13 +255,7 @@ pub fn drop_earlier(
         let Some(reduced) = without_earlier(&model, e) else {
             continue;
         };
-        let Ok(r) = refit(reduced, fd, riv) else {
-            continue;
-        };
-        let removed = model.n_params().saturating_sub(r.model.n_params()).max(1);
-        let (_, f, f_crit) = f_test(&model, fd, r.cost, cost, removed, cfg);
-        let stable = unstable_parts(&r.model) <= unstable_parts(&model);
-        if r.cost.is_finite() && f <= f_crit && stable {
+        if let Some((r, f, f_crit)) = insignificant_without(cfg, fd, riv, (&model, cost), reduced) {
             let what = match e {
                 Earlier::Factor(k) => format!(
                     "the dynamics factor of step {} ({:?}, order {})",
