@@ -16,7 +16,7 @@ use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
 use crate::riv::{iterate_warm, RivConfig};
 use crate::significance::{chi2_upper, f_statistic, noise_scale, submodel_cost_increase};
 use crate::{fit_numerators, AdditiveModel, RivError, SubmodelKind};
-use frf_data::{Fit, ModelStructure};
+use frf_data::{Fit, ModelStructure, C64};
 use std::f64::consts::TAU;
 
 /// Settings of [`adapt_modes`].
@@ -282,7 +282,9 @@ pub fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
     (data.omega[b] - data.omega[a]) / TAU
 }
 
-fn mode_f_hz(model: &AdditiveModel, i: usize) -> f64 {
+/// The natural frequency of submodel `i` of `model` (its upper pole's `|p| / 2 pi`), Hz;
+/// NaN when it has none.
+pub fn mode_f_hz(model: &AdditiveModel, i: usize) -> f64 {
     model
         .upper_pole(&model.submodels[i])
         .map(|p| p.norm() / TAU)
@@ -350,6 +352,31 @@ type DropOutcome = (
     Option<ResidualStats>,
 );
 
+/// The pairs of modes of `model` (submodel indices `a < b`, in index order) whose upper
+/// poles are closer than `fraction` of their mean `|Re p|`, with that distance over
+/// the mean `|Re p|`: [`DUPLICATE_FRACTION`] finds the poles two submodels cannot both
+/// hold (the drop pass), a fraction of 1 the modes within each other's half-power
+/// half-bandwidth (the diagnosis's twin merge).
+pub fn close_mode_pairs(model: &AdditiveModel, fraction: f64) -> Vec<(usize, usize, f64)> {
+    let poles: Vec<(usize, C64)> = model
+        .submodels
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.kind == SubmodelKind::Mode)
+        .filter_map(|(i, s)| model.upper_pole(s).map(|p| (i, p)))
+        .collect();
+    let mut pairs = Vec::new();
+    for (k, &(a, pa)) in poles.iter().enumerate() {
+        for &(b, pb) in &poles[k + 1..] {
+            let (d, bw) = ((pa - pb).norm(), 0.5 * (pa.re.abs() + pb.re.abs()));
+            if d < fraction * bw {
+                pairs.push((a, b, d / bw));
+            }
+        }
+    }
+    pairs
+}
+
 /// Removes unstable, overdamped, out-of-band, unresolved (a half-power bandwidth below
 /// the line spacing and not significant off its own lines, [`significant_off_peak`]) and
 /// duplicated modes (checks on the poles), then the modes whose numerators are insignificant (F test at
@@ -396,40 +423,32 @@ fn drop_pass(
             ));
         }
     }
-    // duplicates: poles within half their mean bandwidth; the more damped one goes
-    let all_modes: Vec<usize> = (0..n_sub)
-        .filter(|&i| model.submodels[i].kind == SubmodelKind::Mode)
-        .collect();
-    for (ai, &a) in all_modes.iter().enumerate() {
-        for &b in &all_modes[ai + 1..] {
-            if remove.iter().any(|(r, _)| *r == a || *r == b) {
-                continue;
-            }
-            let (Some(pa), Some(pb)) = (
-                model.upper_pole(&model.submodels[a]),
-                model.upper_pole(&model.submodels[b]),
-            ) else {
-                continue;
-            };
-            let bw = 0.5 * (pa.re.abs() + pb.re.abs());
-            if (pa - pb).norm() < DUPLICATE_FRACTION * bw {
-                let (keep, go) = if pa.re.abs() <= pb.re.abs() {
-                    (a, b)
-                } else {
-                    (b, a)
-                };
-                let (keep, go) = if protect.contains(&go) {
-                    (go, keep)
-                } else {
-                    (keep, go)
-                };
-                if !protect.contains(&go) {
-                    remove.push((
-                        go,
-                        format!("duplicate of the mode at {:.2} Hz", mode_f_hz(model, keep)),
-                    ));
-                }
-            }
+    // duplicates: poles within DUPLICATE_FRACTION of their mean |Re p|; the more damped
+    // one goes
+    for (a, b, _) in close_mode_pairs(model, DUPLICATE_FRACTION) {
+        if remove.iter().any(|(r, _)| *r == a || *r == b) {
+            continue;
+        }
+        let damping = |i: usize| {
+            model
+                .upper_pole(&model.submodels[i])
+                .map_or(f64::NAN, |p| p.re.abs())
+        };
+        let (keep, go) = if damping(a) <= damping(b) {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        let (keep, go) = if protect.contains(&go) {
+            (go, keep)
+        } else {
+            (keep, go)
+        };
+        if !protect.contains(&go) {
+            remove.push((
+                go,
+                format!("duplicate of the mode at {:.2} Hz", mode_f_hz(model, keep)),
+            ));
         }
     }
     // 2. significance of what is left

@@ -6,8 +6,8 @@ use crate::pipeline::{err, FitContext, PipelineConfig};
 use crate::FrfitError;
 use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::significance::{f_statistic, noise_scale, submodel_cost_increase};
-use additive_riv::structure::{prune_modes, AdaptConfig};
-use additive_riv::{AdditiveModel, SubmodelKind};
+use additive_riv::structure::{close_mode_pairs, mode_f_hz, prune_modes, AdaptConfig};
+use additive_riv::AdditiveModel;
 use frf_data::{Convergence, Fit, ModelStructure};
 
 /// Submodels and dynamics factors of `model` with a pole in the closed right half-plane.
@@ -105,28 +105,20 @@ fn insignificant_without(
 /// same point).
 const TWIN_FRACTION: f64 = 1.0;
 
-/// The twin pairs of `model` ([`TWIN_FRACTION`]), as submodel indices, closest first
-/// (distance over mean `|Re p|`).
+/// The twin pairs of `model` ([`TWIN_FRACTION`], [`close_mode_pairs`]) of stable modes,
+/// as submodel indices, closest first (distance over mean `|Re p|`).
 fn twin_pairs(model: &AdditiveModel) -> Vec<(usize, usize)> {
-    let poles: Vec<(usize, num_complex::Complex64)> = model
-        .submodels
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.kind == SubmodelKind::Mode)
-        .filter_map(|(i, s)| model.upper_pole(s).map(|p| (i, p)))
-        .filter(|(_, p)| p.re < 0.0)
+    let stable = |i: usize| {
+        model
+            .upper_pole(&model.submodels[i])
+            .is_some_and(|p| p.re < 0.0)
+    };
+    let mut pairs: Vec<(usize, usize, f64)> = close_mode_pairs(model, TWIN_FRACTION)
+        .into_iter()
+        .filter(|&(a, b, _)| stable(a) && stable(b))
         .collect();
-    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
-    for (k, &(a, pa)) in poles.iter().enumerate() {
-        for &(b, pb) in &poles[k + 1..] {
-            let r = (pa - pb).norm() / (0.5 * (pa.re.abs() + pb.re.abs()));
-            if r < TWIN_FRACTION {
-                pairs.push((r, a, b));
-            }
-        }
-    }
-    pairs.sort_by(|x, y| x.0.total_cmp(&y.0));
-    pairs.into_iter().map(|(_, a, b)| (a, b)).collect()
+    pairs.sort_by(|x, y| x.2.total_cmp(&y.2));
+    pairs.into_iter().map(|(a, b, _)| (a, b)).collect()
 }
 
 /// `model` (at cost `cost`) with twin modes ([`twin_pairs`]) merged: for each pair, the
@@ -151,34 +143,30 @@ pub fn merge_twins(
     messages: &mut Vec<String>,
 ) -> Result<(AdditiveModel, f64), FrfitError> {
     let fd = &ctx.fit_data;
-    let mut tested: Vec<(f64, f64)> = Vec::new();
-    let freq = |m: &AdditiveModel, i: usize| {
-        m.upper_pole(&m.submodels[i])
-            .map_or(f64::NAN, |p| p.norm() / std::f64::consts::TAU)
-    };
+    // pairs whose merge failed, by index: valid while the model is unchanged
+    let mut tested: Vec<(usize, usize)> = Vec::new();
+    // the Wald cost increases of the current model's submodels, formed once per model
+    let mut dv: Option<Vec<f64>> = None;
     loop {
-        let pair = twin_pairs(&model).into_iter().find(|&(a, b)| {
-            let (fa, fb) = (freq(&model, a), freq(&model, b));
-            !tested
-                .iter()
-                .any(|&(x, y)| (x - fa).abs() <= 1e-6 * fa && (y - fb).abs() <= 1e-6 * fb)
-        });
-        let Some((a, b)) = pair else {
+        let Some((a, b)) = twin_pairs(&model).into_iter().find(|p| !tested.contains(p)) else {
             return Ok((model, cost));
         };
-        let (fa, fb) = (freq(&model, a), freq(&model, b));
-        tested.push((fa, fb));
-        let dv = submodel_cost_increase(&model, fd).map_err(err("twin modes"))?;
-        let (keep, go) = if dv[a] >= dv[b] { (a, b) } else { (b, a) };
-        let (f_keep, f_go) = (freq(&model, keep), freq(&model, go));
+        tested.push((a, b));
+        let wald = match &mut dv {
+            Some(v) => v,
+            none => none.insert(submodel_cost_increase(&model, fd).map_err(err("twin modes"))?),
+        };
+        let (keep, go) = if wald[a] >= wald[b] { (a, b) } else { (b, a) };
+        let (f_keep, f_go) = (mode_f_hz(&model, keep), mode_f_hz(&model, go));
         let mut merged = model.clone();
         merged.remove_submodel(go);
         if let Some((r, f, f_crit)) = insignificant_without(cfg, fd, riv, (&model, cost), merged) {
             messages.push(format!(
                 "{when}: merged the twin modes at {f_keep:.2} and {f_go:.2} Hz (within their half-power bandwidth): the mode at {f_go:.2} Hz is not significant beside the other refitted (F = {f:.2} <= {f_crit:.2})"
             ));
-            // the pair's frequencies moved: test the others against the merged model
+            // a new model: its pairs and their statistics are new
             tested.clear();
+            dv = None;
             model = r.model;
             cost = r.cost;
         }
@@ -196,6 +184,9 @@ pub enum Earlier {
         before_s: f64,
     },
 }
+
+/// An earlier effect with the index of the step that accepted it.
+pub type EarlierStep = (Earlier, usize);
 
 /// `model` without the earlier effect `e` ([`Earlier`]); `None` when it is not there.
 fn without_earlier(model: &AdditiveModel, e: Earlier) -> Option<AdditiveModel> {
@@ -232,19 +223,20 @@ fn without_earlier(model: &AdditiveModel, e: Earlier) -> Option<AdditiveModel> {
 /// of 6.7 us and a first-order output factor at 15.9 kHz, accepted before the
 /// resonance's factor brought the residual to the noise level). Factors are tested from
 /// the last one, so that the indices of the others hold. Returns the model, its cost
-/// and the step indices of the dropped effects; what happened goes to `messages`, as
-/// after step `step`.
+/// and the dropped effects with the step indices that accepted them, in the order they
+/// were dropped (factors from the highest index: each index holds when they are removed
+/// in that order); what happened goes to `messages`, as after step `step`.
 pub fn drop_earlier(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     riv: &RivConfig,
     (mut model, mut cost): (AdditiveModel, f64),
-    earlier: &[(Earlier, usize)],
+    earlier: &[EarlierStep],
     step: usize,
     messages: &mut Vec<String>,
-) -> Result<(AdditiveModel, f64, Vec<usize>), FrfitError> {
+) -> Result<(AdditiveModel, f64, Vec<EarlierStep>), FrfitError> {
     let fd = &ctx.fit_data;
-    let mut order: Vec<(Earlier, usize)> = earlier.to_vec();
+    let mut order: Vec<EarlierStep> = earlier.to_vec();
     // factors from the highest index, then the delay
     order.sort_by_key(|(e, _)| match e {
         Earlier::Factor(k) => std::cmp::Reverse(*k as i64),
@@ -273,7 +265,7 @@ pub fn drop_earlier(
             messages.push(format!(
                 "after step {step}: removed {what}: not significant beside the later steps (F = {f:.2} <= {f_crit:.2})"
             ));
-            dropped.push(origin);
+            dropped.push((e, origin));
             model = r.model;
             cost = r.cost;
         }

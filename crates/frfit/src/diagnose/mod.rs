@@ -258,7 +258,7 @@ pub fn diagnose(
             st.delay_step = Some((step_index, st.model.factor.delay_s));
         }
         // the effects of earlier steps, tested again beside this one
-        let mut earlier: Vec<(accept::Earlier, usize)> = st
+        let mut earlier: Vec<accept::EarlierStep> = st
             .factor_steps
             .iter()
             .enumerate()
@@ -279,14 +279,12 @@ pub fn diagnose(
             step_index + 1,
             &mut fit.messages,
         )?;
-        for j in dropped {
+        for (e, j) in dropped {
             steps[j].superseded_by = Some(step_index + 1);
-            match st.delay_step {
-                Some((d, _)) if d == j => st.delay_step = None,
-                _ => {
-                    if let Some(k) = st.factor_steps.iter().position(|&o| o == Some(j)) {
-                        st.factor_steps.remove(k);
-                    }
+            match e {
+                accept::Earlier::Delay { .. } => st.delay_step = None,
+                accept::Earlier::Factor(k) => {
+                    st.factor_steps.remove(k);
                 }
             }
         }
