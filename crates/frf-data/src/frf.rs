@@ -17,6 +17,10 @@ pub struct Frf {
     nu: usize,
     values: Vec<C64>,
     variance: Option<Vec<f64>>,
+    /// The noise part of `variance` (from the spread over periods) when `variance` is the
+    /// total variance of a best linear approximation (from the spread over
+    /// realizations): `variance - noise_variance` is the nonlinear distortion's part.
+    noise_variance: Option<Vec<f64>>,
     /// Units of `G`, for example `m/N`.
     pub units: Option<String>,
     /// Free `key=value` metadata (from CSV comment lines, UFF headers, the simulator).
@@ -111,6 +115,7 @@ impl Frf {
             nu,
             values,
             variance,
+            noise_variance: None,
             units: None,
             metadata: BTreeMap::new(),
             comments: Vec::new(),
@@ -143,25 +148,75 @@ impl Frf {
         Self::new(freq_hz, grid.ny, grid.nu, grid.values, None)
     }
 
-    /// Sets (or removes) the variance; checked like in [`Frf::new`].
+    /// Sets (or removes) the variance; checked like in [`Frf::new`]. A noise variance is
+    /// kept when the new variance is present (and removed with it).
     pub fn with_variance(self, variance: Option<Vec<f64>>) -> Result<Self, FrfError> {
         let Frf {
             freq_hz,
             ny,
             nu,
             values,
+            noise_variance,
             units,
             metadata,
             comments,
             source,
             ..
         } = self;
+        let keep_noise = variance.is_some();
         let mut f = Frf::new(freq_hz, ny, nu, values, variance)?;
+        if keep_noise {
+            f.noise_variance = noise_variance;
+        }
         f.units = units;
         f.metadata = metadata;
         f.comments = comments;
         f.source = source;
         Ok(f)
+    }
+
+    /// Sets (or removes) the noise part of the variance (see [`Frf::noise_variances`]):
+    /// it needs the (total) variance beside it, the same layout, finite values `>= 0`.
+    pub fn with_noise_variance(mut self, noise: Option<Vec<f64>>) -> Result<Self, FrfError> {
+        if let Some(v) = &noise {
+            let m = self.ny * self.nu;
+            let n = self.freq_hz.len();
+            if self.variance.is_none() {
+                return Err(FrfError::invalid(
+                    "noise variance",
+                    "given",
+                    "a noise variance (`_var_noise`) needs the total variance (`_var`) beside it",
+                ));
+            }
+            if v.len() != n * m {
+                return Err(FrfError::Dimension {
+                    what: "FRF noise variance".into(),
+                    expected: (n * m).to_string(),
+                    got: v.len().to_string(),
+                });
+            }
+            if let Some(idx) = v.iter().position(|x| !x.is_finite() || *x < 0.0) {
+                let (k, e) = (idx / m, idx % m);
+                return Err(FrfError::InvalidData {
+                    why: format!(
+                        "noise variance {} at line {k} ({} Hz), entry G{}_{} (must be finite and >= 0)",
+                        v[idx],
+                        self.freq_hz[k],
+                        e % self.ny + 1,
+                        e / self.ny + 1
+                    ),
+                });
+            }
+        }
+        self.noise_variance = noise;
+        Ok(self)
+    }
+
+    /// The noise part of the variance (layout of [`Frf::values`]) when the variance is
+    /// the total variance of a best linear approximation estimated from several
+    /// realizations; `None` otherwise (then the variance, if any, is what it is).
+    pub fn noise_variances(&self) -> Option<&[f64]> {
+        self.noise_variance.as_deref()
     }
 
     /// The frequencies, Hz.
@@ -202,8 +257,11 @@ impl Frf {
             for v in &mut self.values[k * m..(k + 1) * m] {
                 *v *= f;
             }
-            if let Some(var) = &mut self.variance {
-                let s = f.norm_sqr();
+            let s = f.norm_sqr();
+            for var in [&mut self.variance, &mut self.noise_variance]
+                .into_iter()
+                .flatten()
+            {
                 for v in &mut var[k * m..(k + 1) * m] {
                     *v *= s;
                 }

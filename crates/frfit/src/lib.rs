@@ -6,10 +6,13 @@
 //! re-exported here so that a user can depend on `frfit` alone.
 
 pub mod chain;
+pub mod data;
 pub mod declared;
 pub mod diagnose;
 pub mod error;
 pub mod export;
+pub mod nonparametric;
+pub mod options;
 pub mod pipeline;
 pub mod plots;
 pub mod reduce;

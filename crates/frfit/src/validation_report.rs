@@ -129,3 +129,88 @@ pub fn markdown(
     }
     s
 }
+
+/// The model's response at `omega` (rad/s) and a one-line description of it; `source`
+/// names the model in errors. A 0 Hz line is refused when the model has a rigid body
+/// (its integrators are infinite there).
+pub fn model_response(
+    file: &additive_riv::ModelFile,
+    source: &str,
+    omega: &[f64],
+) -> Result<(realize::ResponseGrid, String), FrfitError> {
+    use frf_data::ModelStructure;
+    let model = file.to_model().map_err(|e| FrfitError::Io {
+        path: source.to_string(),
+        message: e.to_string(),
+    })?;
+    if omega.first() == Some(&0.0) && file.rigid_body.is_some() {
+        return Err(FrfitError::argument(
+            "data",
+            source,
+            "the data hold a 0 Hz line, where the model's rigid body (integrators) is infinite",
+        ));
+    }
+    let desc = format!(
+        "{} modes, hold {}, delay {:.4} us; {}",
+        file.modes.len(),
+        file.hold,
+        file.delay_s * 1e6,
+        file.provenance.estimator
+    );
+    Ok((model.response_at(omega), desc))
+}
+
+/// Validates a model on an independent measurement `data` (with `_var` columns): the
+/// smallest additive uncertainty per line for which the model is not invalidated with
+/// probability `alpha` (Oomen and Bosgra; [`crate::validation::validate_frf`]). The
+/// variance's degrees of freedom come from the number of realizations `data` declares
+/// (its comments or metadata): with `R` of them the disturbance radii use the
+/// `F(2, 2(R-1))` quantile. `source` names the model in errors. Returns the validation
+/// and a one-line description of the model.
+pub fn validate_model(
+    file: &additive_riv::ModelFile,
+    source: &str,
+    data: &frf_data::Frf,
+    alpha: f64,
+    method: crate::validation::GammaMethod,
+) -> Result<(FrfValidation, String), FrfitError> {
+    use frf_data::FrfDataset;
+    if !(alpha > 0.0 && alpha < 1.0) {
+        return Err(FrfitError::argument(
+            "--alpha",
+            alpha,
+            "a probability strictly between 0 and 1 (for example 0.99)",
+        ));
+    }
+    let (grid, desc) = model_response(file, source, &data.omegas())?;
+    if (grid.ny, grid.nu) != (data.ny(), data.nu()) {
+        return Err(FrfitError::argument(
+            "--data",
+            data.source.as_deref().unwrap_or("<data>"),
+            format!(
+                "the data are {}x{} but the model is {}x{}",
+                data.ny(),
+                data.nu(),
+                grid.ny,
+                grid.nu
+            ),
+        ));
+    }
+    let cfg = crate::validation::FrfValidationConfig {
+        alpha,
+        method,
+        // a variance estimated from R realizations (the file's comments or metadata say
+        // how many) has 2 (R - 1) real degrees of freedom
+        variance_dof: crate::declared::declared(data)
+            .realizations
+            .filter(|&r| r >= 2)
+            .map(|r| 2.0 * (r as f64 - 1.0)),
+        ..Default::default()
+    };
+    let v =
+        crate::validation::validate_frf(&grid, data, None, &cfg).map_err(|e| FrfitError::Fit {
+            what: "validation".into(),
+            why: e.to_string(),
+        })?;
+    Ok((v, desc))
+}

@@ -311,7 +311,7 @@ proptest! {
     /// The chains of [`KNOWN_FAILING_INITS`].
     #[test]
     #[ignore = "fails for the cmif chains on about 0.2 % of the systems: seeds 0..300, both holds, cmif+riv and cmif+ml: 4 of 1200 runs (seeds 128 and 144 through the hold, 1.2e-1 and 2.7e-2: a missing mode the completion's additions and splits do not recover; 144 leaves 76.9 and 193.8 Hz at damping 0.14 and 0.15 whose splits settle onto a neighbour), 10 of 1200 before the split trials; seeds 300..700: 2 of 1600 (663 through the hold, 3.0e-1), 4 of 1600 before; seeds 73, 170, 253, 275 that failed before pass (cmif_start_completion_recovers_missed_modes); run with --ignored"]
-    fn noise_free_data_are_recovered_by_the_cmif_chains(seed in 0u64..10_000, hold in any::<bool>()) {
+    fn known_failure_noise_free_data_are_recovered_by_the_cmif_chains(seed in 0u64..10_000, hold in any::<bool>()) {
         recovers_noise_free(&chains(true), seed, hold)?;
     }
 }
@@ -338,6 +338,7 @@ proptest! {
 /// Every registered refining chain on every seed: the error falls with the noise and
 /// with the lines.
 #[test]
+#[ignore = "slow tier (about 54 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn error_falls_with_the_noise_and_with_the_lines() {
     let cases = error_falls_cases();
     assert!(cases.iter().any(|c| c.0 == "subspace"));

@@ -66,6 +66,7 @@ fn nominal_adds_nothing_beyond_the_hold() {
 }
 
 #[test]
+#[ignore = "slow tier (about 28 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn extra_delay_is_found() {
     let test = "extra_delay_is_found";
     let Some(out) = diagnose(test, "wafer_extra_delay.csv", ModeSelection::Auto) else {
@@ -84,6 +85,7 @@ fn extra_delay_is_found() {
 }
 
 #[test]
+#[ignore = "slow tier (about 23 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn hidden_mode_is_held_by_the_final_model() {
     let test = "hidden_mode_is_held_by_the_final_model";
     let Some(out) = diagnose(test, "wafer_hidden_mode.csv", ModeSelection::Count(17)) else {
@@ -200,6 +202,7 @@ fn lag_is_found(
 }
 
 #[test]
+#[ignore = "slow tier (about 34 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn actuator_lag_is_found() {
     lag_is_found(
         "actuator_lag_is_found",
@@ -211,6 +214,7 @@ fn actuator_lag_is_found() {
 }
 
 #[test]
+#[ignore = "slow tier (about 79 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn sensor_lag_is_found() {
     lag_is_found(
         "sensor_lag_is_found",
@@ -222,6 +226,7 @@ fn sensor_lag_is_found() {
 }
 
 #[test]
+#[ignore = "slow tier (about 56 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn undeclared_delay_and_hold_are_found() {
     let test = "undeclared_delay_and_hold_are_found";
     let Some(path) = require(test, "wafer_nominal.csv") else {

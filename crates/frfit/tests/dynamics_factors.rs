@@ -28,6 +28,7 @@ fn ends_noise_limited_near_truth(
 }
 
 #[test]
+#[ignore = "slow tier (about 36 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
     let f_c = 2500.0;
     let (data, clean) = common::simulated_wafer_with(
@@ -58,6 +59,7 @@ fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
 }
 
 #[test]
+#[ignore = "slow tier (about 37 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_sensor_mount_resonance_is_a_second_order_factor_on_its_row() {
     let (f_r, zeta) = (1450.0, 0.03);
     let (data, clean) = common::simulated_wafer_with(
@@ -95,6 +97,7 @@ fn a_sensor_mount_resonance_is_a_second_order_factor_on_its_row() {
 /// `1 / w_c` (64 us) with the 60 us; the common lag then takes it back (the factor
 /// traded against the fitted delay), so the final delay is the one the stage has.
 #[test]
+#[ignore = "slow tier (about 41 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_common_lag_with_an_undeclared_delay_are_both_found() {
     assert_lag_and_delay_found(2500.0);
 }
@@ -105,6 +108,7 @@ fn a_common_lag_with_an_undeclared_delay_are_both_found() {
 /// 336 us (the lag's 199 us of group delay with the 160 us). Both end with the lag
 /// within 3 % and the stage's delay.
 #[test]
+#[ignore = "slow tier (about 110 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_common_lag_inside_the_band_with_an_undeclared_delay_are_both_found() {
     for f_c in [1500.0, 800.0] {
         assert_lag_and_delay_found(f_c);
@@ -163,6 +167,7 @@ fn assert_lag_and_delay_found(f_c: f64) {
 /// the loop must name an `input_dynamics` on input 5 with a numerator (its zero and
 /// pole within 2 %) and end within 1e-4 of the noiseless response.
 #[test]
+#[ignore = "slow tier (about 27 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn an_actuator_lead_lag_is_an_input_factor_with_a_zero() {
     let (f_z, f_p) = (300.0, 900.0);
     let (data, clean) = common::simulated_wafer_with(
@@ -201,6 +206,7 @@ fn an_actuator_lead_lag_is_an_input_factor_with_a_zero() {
 /// lag), on input 5: the factor is named on input 5 with its zero, and the model ends
 /// within 1e-4 of the noiseless response.
 #[test]
+#[ignore = "slow tier (about 27 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn an_actuator_lag_lead_keeps_its_zero_above_the_band() {
     let (f_z, f_p) = (2400.0, 600.0);
     let (data, clean) = common::simulated_wafer_with(
@@ -243,6 +249,7 @@ fn an_actuator_lag_lead_keeps_its_zero_above_the_band() {
 /// `input_dynamics` on input 4 with its corner within 0.1 % of 700 Hz, no pole beyond
 /// the band, and the model within 1e-4 of the noiseless response.
 #[test]
+#[ignore = "slow tier (about 169 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn an_actuator_lag_is_first_order_even_where_a_second_order_fits_as_well() {
     let f_c = 700.0;
     let (data, clean, _) = common::simulate(&common::Sim {

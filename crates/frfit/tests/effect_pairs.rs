@@ -82,6 +82,7 @@ fn a_suspension_with_a_missed_mode() {
 /// A feedthrough (crosstalk of a few nm/N, inside the hold and delay like the plant)
 /// and a sensor-mount resonance on output 2 (1450 Hz, damping 0.03): both named.
 #[test]
+#[ignore = "slow tier (about 45 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_feedthrough_with_a_sensor_mount_resonance() {
     feedthrough_with_resonance(3, 1450.0);
 }
@@ -117,6 +118,7 @@ fn feedthrough_with_resonance(seed: u64, f_r: f64) {
 /// A sensor-mount resonance on output 3 (damping 0.03) 3 % above one of the plate's
 /// modes (the tenth, 890.9 Hz): the factor, not a second mode, on its row.
 #[test]
+#[ignore = "slow tier (about 27 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_sensor_resonance_near_a_mode() {
     let out = resonance_near_a_mode(3, 9, 1.03, false);
     assert!(out.summary.initial.restart.is_none(), "no restart");
@@ -128,6 +130,7 @@ fn a_sensor_resonance_near_a_mode() {
 /// factor's refit leaves the twin of the 713.2 Hz mode that held the row's phase
 /// unstable, which the trial removes as redundant.
 #[test]
+#[ignore = "slow tier (about 80 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_sensor_resonance_just_below_a_mode_of_another_plate() {
     let out = resonance_near_a_mode(5, 6, 0.97, false);
     // the first fit the loop started from is the common-denominator restart's (a better
@@ -148,6 +151,7 @@ fn a_sensor_resonance_just_below_a_mode_of_another_plate() {
 /// The same below the seventh mode of a third plate (seed 4, 703.0 Hz): its first fit
 /// also lost modes (11 from 16 CMIF peaks) and is restarted.
 #[test]
+#[ignore = "slow tier (about 58 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_sensor_resonance_just_below_a_mode_of_a_third_plate() {
     let out = resonance_near_a_mode(4, 6, 0.97, false);
     assert!(out.summary.initial.restart.is_some(), "a restart");
@@ -159,6 +163,7 @@ fn a_sensor_resonance_just_below_a_mode_of_a_third_plate() {
 /// median so that the residual's peak test proposes neither; the round with nothing
 /// else to propose tests the modes the common-denominator start holds.
 #[test]
+#[ignore = "slow tier (about 53 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_sensor_resonance_below_a_mode_and_two_close_missed_modes() {
     let out = resonance_near_a_mode(7, 6, 0.97, true);
     assert!(out.summary.initial.restart.is_none(), "no restart");
@@ -183,6 +188,7 @@ fn a_sensor_resonance_below_a_mode_and_two_close_missed_modes() {
 /// the right half-plane by the trial's refit, is removed there as redundant). The first
 /// fit's split of 388.9 Hz can leave a twin 0.3 Hz away, merged after the step.
 #[test]
+#[ignore = "slow tier (about 81 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_sensor_resonance_above_a_mode_beside_its_neighbour() {
     let out = resonance_near_a_mode(8, 4, 1.03, true);
     let factors = &out.fit.model.dynamics;
@@ -202,6 +208,7 @@ fn a_sensor_resonance_above_a_mode_beside_its_neighbour() {
 /// A resonance 3 % above the thirteenth mode of plate seed 14 (1369.6 Hz beside
 /// 1329.7 Hz), which the first fit holds as a mode and splits its neighbours around.
 #[test]
+#[ignore = "slow tier (about 59 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_sensor_resonance_above_a_high_mode() {
     resonance_near_a_mode(14, 12, 1.03, true);
 }
@@ -247,6 +254,7 @@ fn resonance_near_a_mode(seed: u64, mode: usize, ratio: f64, missed_modes: bool)
 /// top edge (2 kHz): in the band it is a magnitude rise `1 / (1 - (f / f_r)^2)` on that
 /// row with little phase.
 #[test]
+#[ignore = "slow tier (about 23 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn a_sensor_resonance_above_the_band() {
     resonance_above_the_band(3, 2900.0);
 }

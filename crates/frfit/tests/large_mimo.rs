@@ -317,6 +317,7 @@ fn fit_random_20_by_20(
 /// keep the estimate (the cost is flat in the delay there), and the ML refinement holds
 /// the delay until its structure adaptation has added the missed modes.
 #[test]
+#[ignore = "slow tier (about 22 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn the_default_chain_finds_every_mode_of_a_delay_free_20_by_20_plant() {
     let (out, n, fit_f) = fit_random_20_by_20(7, false, 1e-3, None);
     let s = &out.summary;
@@ -361,6 +362,7 @@ fn the_default_chain_finds_every_mode_of_a_delay_free_20_by_20_plant() {
 /// additions, the limit before `MlConfig::add_modes_fraction`, the cluster kept two
 /// modes and the fit ended at 33 times the noise.
 #[test]
+#[ignore = "slow tier (about 17 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn the_chain_adds_every_mode_a_large_start_merged() {
     let (out, n, fit_f) = fit_random_20_by_20(11, true, 1e-3, Some(DelayChoice::None));
     assert_every_mode_at_the_noise_level(&out, n, &fit_f);
@@ -376,6 +378,7 @@ fn the_chain_adds_every_mode_a_large_start_merged() {
 /// below the twice the expected ratio that the adaptation used to need; from a ratio of
 /// 1.2 it adds them and reaches the noise level.
 #[test]
+#[ignore = "slow tier (about 14 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn the_chain_finds_every_mode_at_ten_times_the_noise() {
     let (out, n, fit_f) = fit_random_20_by_20(33, true, 1e-2, Some(DelayChoice::None));
     assert_every_mode_at_the_noise_level(&out, n, &fit_f);

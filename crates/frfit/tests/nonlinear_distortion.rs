@@ -62,6 +62,7 @@ fn true_ratio(data: &Frf, exact: &Frf, d: f64) -> f64 {
 }
 
 #[test]
+#[ignore = "slow tier (about 30 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
 fn stochastic_distortion_of_one_realization_is_called_nonlinear_distortion() {
     let d = 1e-2;
     let (data, exact) = one_realization(d);

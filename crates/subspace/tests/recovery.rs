@@ -173,7 +173,7 @@ proptest! {
     /// proportional to the noise once the structure is found).
     #[test]
     #[ignore = "fails on seed 59664 (2 x 2 through the hold, no rigid body): median error 2.7e-4 -> 1.0e-5 -> 2.1e-6 for noise 1e-3 -> 1e-4 -> 1e-5; at 1e-5 the subspace poles of its lowest mode (40 Hz, rank-2 residue, split by the noise) stay 2.4e-5 relative off and the residue refit ends at 13 to 26 times the noise cost: the subspace estimate is not efficient there, a pole refinement (riv/ml in the chain) is. On other random seeds the ratio is marginal: seed 99836 (hold) 5.2e-5 -> 4.5e-6 -> 9.4e-7 (4.8x), seed 99447 (hold) 4.4e-5 -> 9.4e-6 -> 4.8e-7 (4.7x); one run of 100 cases passed, another failed after 41 (run with PROPTEST_CASES=100 --ignored)"]
-    fn the_error_falls_with_the_noise(seed in 0u64..100_000, hold in any::<bool>(), rigid in any::<bool>()) {
+    fn known_failure_the_error_falls_with_the_noise(seed in 0u64..100_000, hold in any::<bool>(), rigid in any::<bool>()) {
         let [e3, e4, e5] = errors(seed, hold, rigid);
         prop_assert!(e3 / e4 >= 5.0 && e4 / e5 >= 5.0, "seed {seed} hold {hold} rigid {rigid}: {e3:.3e} -> {e4:.3e} -> {e5:.3e}");
     }

@@ -293,6 +293,11 @@ impl Accumulator {
             .then(|| self.cv_sum.iter().map(|v| v / rr).collect::<Vec<C64>>());
         let var = total.clone().or_else(|| noise.clone());
         let mut frf = Frf::new(self.freq_hz, self.ny, self.nu, self.mean, var)?;
+        // with several realizations `var` is the total variance; its noise part goes
+        // beside it (`_var_noise`), so that `var - var_noise` is the nonlinear part
+        if total.is_some() {
+            frf = frf.with_noise_variance(noise.clone())?;
+        }
         frf.metadata.insert("periods".into(), periods.to_string());
         frf.metadata
             .insert("realizations".into(), self.count.to_string());

@@ -3,7 +3,7 @@
 //! add each one that explains more than noise, and report the error before and after.
 
 use super::common::load_data;
-use super::model_opts::{check_weighting, progress, FitOptions};
+use super::model_opts::{check_options, progress, FitOptions};
 use super::output::{print_fit, write_outputs};
 use super::validate;
 use clap::Args as ClapArgs;
@@ -44,7 +44,7 @@ pub struct Args {
 /// Runs `frfit diagnose`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     let data = load_data(&args.data)?;
-    check_weighting(&args.opts, data.has_variance())?;
+    check_options(&args.opts, &data)?;
     let mut cfg = args.opts.pipeline_config();
     cfg.diagnose = true;
     if let Some(fs) = args.fs {

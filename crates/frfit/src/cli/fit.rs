@@ -3,10 +3,9 @@
 //! with CMIF initialisation, delay and hold handling, and the adaptation of the modes.
 
 use super::common::load_data;
-use super::model_opts::{check_weighting, progress, FitOptions};
+use super::model_opts::{check_options, progress, FitOptions};
 use super::output::{print_fit, write_outputs};
 use clap::Args as ClapArgs;
-use frf_data::FrfDataset;
 use frfit::pipeline;
 use frfit::FrfitError;
 use std::path::PathBuf;
@@ -30,7 +29,7 @@ pub struct Args {
 /// Runs `frfit fit`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     let data = load_data(&args.data)?;
-    check_weighting(&args.opts, data.has_variance())?;
+    check_options(&args.opts, &data)?;
     let mut cfg = args.opts.pipeline_config();
     // the verdict and the floor comparison are the report's; `fit` prints neither
     cfg.final_analysis = args.report.is_some();

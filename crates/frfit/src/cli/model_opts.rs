@@ -5,7 +5,7 @@ use super::common::Band;
 use additive_riv::{DelayChoice, Hold, IvMethod, ModeSelection};
 use clap::{Args as ClapArgs, ValueEnum};
 use frf_data::{ProgressSink, Weighting};
-use frfit::chain::SkBands;
+use frfit::options::FitSpec;
 use frfit::pipeline::{FrfType, PipelineConfig};
 use frfit::FrfitError;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -13,94 +13,7 @@ use sk_fit::bands::BandSpec;
 use std::sync::Mutex;
 use std::time::Duration;
 
-/// `--hold zoh:FS | sinc:FS | none` (`none` overrides a hold the file declares).
-pub fn parse_hold(s: &str) -> Result<Hold, String> {
-    let s = s.trim();
-    if s.eq_ignore_ascii_case("none") {
-        return Ok(Hold::None);
-    }
-    let (kind, fs) = s
-        .split_once(':')
-        .ok_or_else(|| format!("expected zoh:FS_HZ, sinc:FS_HZ or none, got `{s}`"))?;
-    let fs: f64 = fs
-        .trim()
-        .parse()
-        .map_err(|_| format!("sample rate `{fs}` in `{s}` is not a number (Hz)"))?;
-    if !(fs.is_finite() && fs > 0.0) {
-        return Err(format!("sample rate {fs} in `{s}` must be > 0 Hz"));
-    }
-    match kind.trim().to_ascii_lowercase().as_str() {
-        "zoh" => Ok(Hold::Zoh { fs_hz: fs }),
-        "sinc" => Ok(Hold::Sinc { fs_hz: fs }),
-        k => Err(format!(
-            "unknown hold `{k}`: use zoh:FS_HZ (exact) or sinc:FS_HZ"
-        )),
-    }
-}
-
-/// `--bands auto | 1 | F1,F2,...` (cut-offs in Hz).
-pub fn parse_bands(s: &str) -> Result<BandSpec, String> {
-    BandSpec::parse(s).map_err(|e| e.to_string())
-}
-
-/// `--band-weights QL,QH`, both in `[0, 1]`.
-pub fn parse_band_weights(s: &str) -> Result<(f64, f64), String> {
-    let (a, b) = s
-        .split_once(',')
-        .ok_or_else(|| format!("expected QL,QH (e.g. 0.1,1e-4), got `{s}`"))?;
-    let q = |name: &str, v: &str| -> Result<f64, String> {
-        let x: f64 = v
-            .trim()
-            .parse()
-            .map_err(|_| format!("{name} `{}` in `{s}` is not a number", v.trim()))?;
-        if !(0.0..=1.0).contains(&x) {
-            return Err(format!("{name} {x} in `{s}` must lie in [0, 1]"));
-        }
-        Ok(x)
-    };
-    Ok((q("QL", a)?, q("QH", b)?))
-}
-
-/// `--delay auto | none | SECONDS` (also `150us`, `0.2ms`).
-pub fn parse_delay(s: &str) -> Result<DelayChoice, String> {
-    let t = s.trim().to_ascii_lowercase();
-    match t.as_str() {
-        "auto" => return Ok(DelayChoice::Auto),
-        "none" | "0" => return Ok(DelayChoice::None),
-        _ => {}
-    }
-    let (num, scale) = if let Some(v) = t.strip_suffix("us") {
-        (v, 1e-6)
-    } else if let Some(v) = t.strip_suffix("ms") {
-        (v, 1e-3)
-    } else if let Some(v) = t.strip_suffix('s') {
-        (v, 1.0)
-    } else {
-        (t.as_str(), 1.0)
-    };
-    let v: f64 = num.trim().parse().map_err(|_| {
-        format!("expected auto, none or a delay in seconds (e.g. 1.5e-4 or 150us), got `{s}`")
-    })?;
-    if !v.is_finite() || v < 0.0 {
-        return Err(format!("delay `{s}` must be finite and >= 0"));
-    }
-    Ok(DelayChoice::Fixed { seconds: v * scale })
-}
-
-/// `--modes auto | N`.
-pub fn parse_modes(s: &str) -> Result<ModeSelection, String> {
-    if s.trim().eq_ignore_ascii_case("auto") {
-        return Ok(ModeSelection::Auto);
-    }
-    let n: usize = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("expected auto or a number of modes, got `{s}`"))?;
-    if n == 0 {
-        return Err("--modes must be at least 1 (or auto)".into());
-    }
-    Ok(ModeSelection::Count(n))
-}
+pub use frfit::options::{parse_band_weights, parse_bands, parse_delay, parse_hold, parse_modes};
 
 /// `--method`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -200,44 +113,41 @@ pub struct FitOptions {
 }
 
 impl FitOptions {
-    /// The pipeline configuration these options describe.
-    pub fn pipeline_config(&self) -> PipelineConfig {
-        PipelineConfig {
-            band_hz: self
-                .band
-                .map(|b| (b.lo_hz.unwrap_or(0.0), b.hi_hz.unwrap_or(f64::MAX))),
-            modes: self.modes.clone().unwrap_or_default(),
-            hold: self.hold,
+    /// The options as the library's [`FitSpec`] (one set of rules for the CLI and the
+    /// Python package).
+    pub fn spec(&self) -> FitSpec {
+        FitSpec {
+            band: self.band,
             delay: self.delay,
+            hold: self.hold,
+            modes: self.modes.clone(),
             method: match self.method {
                 Method::Riv => IvMethod::Riv,
                 Method::Sk => IvMethod::Sk,
             },
+            init: self.init.clone(),
+            refine: self.refine.clone(),
+            order: self.order,
+            bands: self.bands.clone(),
+            band_weights: self.band_weights,
             weighting: match self.weighting {
                 WeightingArg::Auto => Weighting::Auto,
                 WeightingArg::Variance => Weighting::InverseVariance,
                 WeightingArg::Magnitude => Weighting::InverseMagnitude,
                 WeightingArg::Uniform => Weighting::Uniform,
             },
-            init: self.init.clone(),
-            refine: self.refine.clone(),
-            order: self.order,
-            sk_bands: self.bands.clone().map(|spec| {
-                let d = SkBands::default();
-                let (q_low, q_high) = self.band_weights.unwrap_or((d.q_low, d.q_high));
-                SkBands {
-                    spec,
-                    q_low,
-                    q_high,
-                }
-            }),
             frf_type: match self.frf_type {
                 FrfTypeArg::Displacement => FrfType::Displacement,
                 FrfTypeArg::Velocity => FrfType::Velocity,
                 FrfTypeArg::Accelerance => FrfType::Accelerance,
             },
-            ..Default::default()
+            fs_hz: None,
         }
+    }
+
+    /// The pipeline configuration these options describe.
+    pub fn pipeline_config(&self) -> PipelineConfig {
+        self.spec().pipeline_config()
     }
 }
 
@@ -297,14 +207,7 @@ pub fn progress(quiet: bool) -> (ProgressSink, Option<ProgressBar>) {
     (sink, Some(bar))
 }
 
-/// Checks that a weighting the user asked for can be applied.
-pub fn check_weighting(opts: &FitOptions, has_var: bool) -> Result<(), FrfitError> {
-    if opts.weighting == WeightingArg::Variance && !has_var {
-        return Err(FrfitError::argument(
-            "--weighting",
-            "variance",
-            "the data carry no `_var` columns; use auto, magnitude or uniform",
-        ));
-    }
-    Ok(())
+/// Checks the options against the data ([`FitSpec::check`]).
+pub fn check_options(opts: &FitOptions, data: &frf_data::Frf) -> Result<(), FrfitError> {
+    opts.spec().check(data)
 }

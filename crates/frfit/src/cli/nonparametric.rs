@@ -7,15 +7,12 @@
 //! its sign; `NAME:COL` takes column `COL` (1-based) of a matrix variable.
 
 use clap::Args as ClapArgs;
-use experiment::matfile::MatFile;
-use experiment::nonparametric::spectra_csv::read_spectra_csv;
-use experiment::nonparametric::time_records::{
-    spectra_from_records, ExperimentRecords, RecordConfig,
-};
-use experiment::nonparametric::{estimate, EstimatorConfig, PeriodicSpectra};
 use frf_data::FrfDataset;
+use frfit::nonparametric::{
+    estimate_described, parse_lines, spectra_from_files, Estimated, RecordSpec,
+};
 use frfit::FrfitError;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Arguments of `frfit nonparametric`.
 #[derive(ClapArgs, Debug)]
@@ -44,141 +41,39 @@ pub struct Args {
     /// the largest drop between lines within this many dB of the strongest.
     #[arg(long, default_value_t = 40.0)]
     pub line_threshold_db: f64,
+    /// The excited DFT bins, when the line detection should not guess them: bins `K`
+    /// and ranges `A-B` or `A-B/S` (step S), comma separated (`1-999/2`: the odd bins).
+    #[arg(long, value_parser = parse_lines, value_name = "K,A-B/S,..")]
+    pub lines: Option<Vec<usize>>,
     /// Output FRF CSV.
     #[arg(long)]
     pub out: PathBuf,
 }
 
-fn is_mat(p: &Path) -> bool {
-    p.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("mat"))
-}
-
-/// A signal spec with an optional leading `-`: (sign, name).
-fn signed(spec: &str) -> (f64, &str) {
-    match spec.trim().strip_prefix('-') {
-        Some(rest) => (-1.0, rest.trim()),
-        None => (1.0, spec.trim()),
+impl Args {
+    /// The record options as the library takes them.
+    fn spec(&self) -> RecordSpec {
+        RecordSpec {
+            inputs: self.input.clone(),
+            outputs: self.output.clone(),
+            fs: self.fs,
+            period: self.period,
+            drop_periods: self.drop_periods,
+            lines: self.lines.clone(),
+            line_threshold_db: self.line_threshold_db,
+        }
     }
-}
-
-fn load_mat_records(args: &Args) -> Result<(PeriodicSpectra, Vec<String>), FrfitError> {
-    if args.input.is_empty() || args.output.is_empty() {
-        return Err(FrfitError::argument(
-            "--input/--output",
-            format!("{:?} / {:?}", args.input, args.output),
-            "name the input and output signals of the .mat files (e.g. --input iq_adx --output theta_mx,theta_my)",
-        ));
-    }
-    let mut experiments = Vec::with_capacity(args.files.len());
-    let mut fs_file = None;
-    let mut notes = Vec::new();
-    for f in &args.files {
-        if !is_mat(f) {
-            return Err(FrfitError::argument(
-                "files",
-                f.display(),
-                "mix of file kinds: give either .mat files or one periodic spectra .csv",
-            ));
-        }
-        let m = MatFile::read(f)?;
-        if fs_file.is_none() {
-            fs_file = m.scalar("fs");
-        }
-        let get = |spec: &String| -> Result<Vec<f64>, FrfitError> {
-            let (s, name) = signed(spec);
-            let mut x = m.signal(name)?;
-            if s < 0.0 {
-                x.iter_mut().for_each(|v| *v = -*v);
-            }
-            Ok(x)
-        };
-        let inputs = args.input.iter().map(get).collect::<Result<Vec<_>, _>>()?;
-        let outputs = args.output.iter().map(get).collect::<Result<Vec<_>, _>>()?;
-        if !m.skipped.is_empty() {
-            notes.push(format!(
-                "{}: skipped non-numeric variables {}",
-                f.display(),
-                m.skipped
-                    .iter()
-                    .map(|(n, k)| format!("{n} ({k})"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ));
-        }
-        experiments.push(ExperimentRecords { inputs, outputs });
-    }
-    let fs = match (args.fs, fs_file) {
-        (Some(v), _) => v,
-        (None, Some(v)) => v,
-        (None, None) => {
-            return Err(FrfitError::argument(
-                "--fs",
-                "missing",
-                "give the sample rate (the .mat file has no scalar `fs`)",
-            ))
-        }
-    };
-    let period = args.period.ok_or_else(|| {
-        FrfitError::argument(
-            "--period",
-            "missing",
-            "give the number of samples per period",
-        )
-    })?;
-    let cfg = RecordConfig {
-        fs,
-        period,
-        drop_periods: args.drop_periods,
-        bins: None,
-        line_threshold_db: args.line_threshold_db,
-    };
-    let spectra = spectra_from_records(&experiments, &cfg)?;
-    Ok((spectra, notes))
 }
 
 /// Runs `frfit nonparametric`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
-    for f in &args.files {
-        if !f.is_file() {
-            return Err(FrfitError::Io {
-                path: f.display().to_string(),
-                message: "no such file".into(),
-            });
-        }
-    }
-    let (spectra, mut notes) = if args.files.iter().any(|f| is_mat(f)) {
-        load_mat_records(&args)?
-    } else {
-        if args.files.len() != 1 {
-            return Err(FrfitError::argument(
-                "files",
-                args.files.len(),
-                "give one periodic spectra CSV (it holds every experiment and realization)",
-            ));
-        }
-        (read_spectra_csv(&args.files[0])?, Vec::new())
-    };
-    let est = estimate(&spectra, &EstimatorConfig::default())?;
+    let spec = args.spec();
+    let (spectra, notes) = spectra_from_files(&args.files, &spec)?;
     let sources: Vec<String> = args.files.iter().map(|f| f.display().to_string()).collect();
-    let mut comments = vec![format!("nonparametric FRF of {}", sources.join(", "))];
-    if !args.input.is_empty() {
-        comments.push(format!(
-            "inputs {}; outputs {}",
-            args.input.join(","),
-            args.output.join(",")
-        ));
-    }
-    comments.extend(spectra.comments.iter().cloned());
-    comments.append(&mut notes);
-    comments.push(format!(
-        "estimator: G = mean_p(Y_p) mean_p(U_p)^-1 per realization, mean over {} realization(s); {} periods, {} experiment(s); variance: {}",
-        est.realizations,
-        est.periods,
-        est.n_experiments,
-        est.frf.metadata.get("variance").cloned().unwrap_or_default()
-    ));
+    let Estimated {
+        estimate: est,
+        comments,
+    } = estimate_described(&spectra, &sources, &spec, notes)?;
     frf_data::io::write_frf_csv(&args.out, &est.frf, &comments)?;
     if !quiet {
         let n = est.frf.n_lines();
@@ -210,6 +105,7 @@ mod tests {
             period: Some(2500),
             drop_periods: 1,
             line_threshold_db: 40.0,
+            lines: None,
             out,
         }
     }
@@ -269,12 +165,5 @@ mod tests {
         a.input = vec!["nothere".into()];
         assert!(run(a, true).unwrap_err().to_string().contains("nothere"));
         std::fs::remove_dir_all(&dir).ok();
-    }
-
-    #[test]
-    fn signed_names() {
-        assert_eq!(signed("-theta_my"), (-1.0, "theta_my"));
-        assert_eq!(signed("theta_mx"), (1.0, "theta_mx"));
-        assert_eq!(signed(" x:3"), (1.0, "x:3"));
     }
 }

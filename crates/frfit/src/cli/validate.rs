@@ -10,14 +10,12 @@
 
 use super::common::load_data;
 use clap::{Args as ClapArgs, ValueEnum};
-use frf_data::{FrfDataset, ModelStructure};
 use frfit::additive_riv::ModelFile;
-use frfit::realize::ResponseGrid;
-use frfit::validation::{validate_frf, FrfValidation, FrfValidationConfig, GammaMethod};
+use frfit::validation::{FrfValidation, GammaMethod};
 pub use frfit::validation_report::verdict_text;
-use frfit::validation_report::write_validation_dir;
+use frfit::validation_report::{validate_model, write_validation_dir};
 use frfit::FrfitError;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// How the per-column minimum is computed.
@@ -49,32 +47,6 @@ pub struct Args {
     pub out: PathBuf,
 }
 
-/// The model's response at `omega` (rad/s) and a one-line description: the only place
-/// the CLI reads a model file for validation.
-fn model_response(path: &Path, omega: &[f64]) -> Result<(ResponseGrid, String), FrfitError> {
-    let io = |e: &dyn std::fmt::Display| FrfitError::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
-    let file = ModelFile::read(path).map_err(|e| io(&e))?;
-    let model = file.to_model().map_err(|e| io(&e))?;
-    if omega.first() == Some(&0.0) && file.rigid_body.is_some() {
-        return Err(FrfitError::argument(
-            "--data",
-            path.display(),
-            "the data hold a 0 Hz line, where the model's rigid body (integrators) is infinite",
-        ));
-    }
-    let desc = format!(
-        "{} modes, hold {}, delay {:.4} us; {}",
-        file.modes.len(),
-        file.hold,
-        file.delay_s * 1e6,
-        file.provenance.estimator
-    );
-    Ok((model.response_at(omega), desc))
-}
-
 /// Runs `frfit validate`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     validate_into(&args, quiet).map(|_| ())
@@ -93,38 +65,16 @@ pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitErr
         ));
     }
     let data = load_data(&args.data)?;
-    let (grid, desc) = model_response(&args.model, &data.omegas())?;
-    if (grid.ny, grid.nu) != (data.ny(), data.nu()) {
-        return Err(FrfitError::argument(
-            "--data",
-            args.data.display(),
-            format!(
-                "the data are {}x{} but the model is {}x{}",
-                data.ny(),
-                data.nu(),
-                grid.ny,
-                grid.nu
-            ),
-        ));
-    }
-    let cfg = FrfValidationConfig {
-        alpha: args.alpha,
-        method: match args.method {
-            Method::ClosedForm => GammaMethod::ClosedForm,
-            Method::Mu => GammaMethod::Mu,
-        },
-        // a variance estimated from R realizations (the file's comments or metadata say
-        // how many) has 2 (R - 1) real degrees of freedom
-        variance_dof: frfit::declared::declared(&data)
-            .realizations
-            .filter(|&r| r >= 2)
-            .map(|r| 2.0 * (r as f64 - 1.0)),
-        ..Default::default()
-    };
-    let v = validate_frf(&grid, &data, None, &cfg).map_err(|e| FrfitError::Fit {
-        what: "validation".into(),
-        why: e.to_string(),
+    let source = args.model.display().to_string();
+    let file = ModelFile::read(&args.model).map_err(|e| FrfitError::Io {
+        path: source.clone(),
+        message: e.to_string(),
     })?;
+    let method = match args.method {
+        Method::ClosedForm => GammaMethod::ClosedForm,
+        Method::Mu => GammaMethod::Mu,
+    };
+    let (v, desc) = validate_model(&file, &source, &data, args.alpha, method)?;
     write_validation_dir(
         &args.out,
         &args.model.display().to_string(),

@@ -1,0 +1,328 @@
+//! The nonparametric FRF of periodic measurements for every front end (`frfit
+//! nonparametric` and the Python package): time records (MATLAB `.mat` files or arrays)
+//! or a periodic spectra CSV in, the FRF with its variance and the comments that say how
+//! it was estimated out (crate `experiment`, the estimator of McKelvey and of Pintelon
+//! and Schoukens' robust method).
+
+use crate::FrfitError;
+use experiment::matfile::MatFile;
+use experiment::nonparametric::spectra_csv::read_spectra_csv;
+use experiment::nonparametric::time_records::{
+    spectra_from_records, ExperimentRecords, RecordConfig,
+};
+use experiment::nonparametric::{estimate, EstimatorConfig, NonparametricFrf, PeriodicSpectra};
+use std::path::{Path, PathBuf};
+
+/// How to read and cut time records.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordSpec {
+    /// Input signal names in `.mat` files (`-NAME` flips the sign, `NAME:COL` takes
+    /// column `COL`, 1-based, of a matrix variable). Unused for arrays.
+    pub inputs: Vec<String>,
+    /// Output signal names (same syntax).
+    pub outputs: Vec<String>,
+    /// Sample rate, Hz. Default: the scalar `fs` of the first `.mat` file.
+    pub fs: Option<f64>,
+    /// Samples per period. Required.
+    pub period: Option<usize>,
+    /// Leading periods dropped as transient. Default 0.
+    pub drop_periods: usize,
+    /// The excited DFT bins (`k` of `f = k fs / N`), when known; otherwise they are
+    /// found from the input spectrum. Default: found.
+    pub lines: Option<Vec<usize>>,
+    /// Window of the line detection, dB below the strongest line. Default 40.
+    pub line_threshold_db: f64,
+}
+
+impl Default for RecordSpec {
+    fn default() -> Self {
+        Self {
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            fs: None,
+            period: None,
+            drop_periods: 0,
+            lines: None,
+            line_threshold_db: 40.0,
+        }
+    }
+}
+
+impl RecordSpec {
+    /// The record configuration at sample rate `fs`.
+    fn record_config(&self, fs: f64) -> Result<RecordConfig, FrfitError> {
+        if !(fs.is_finite() && fs > 0.0) {
+            return Err(FrfitError::argument(
+                "--fs",
+                fs,
+                "must be a sample rate > 0 Hz",
+            ));
+        }
+        let period = self.period.ok_or_else(|| {
+            FrfitError::argument(
+                "--period",
+                "missing",
+                "give the number of samples per period",
+            )
+        })?;
+        if period < 2 {
+            return Err(FrfitError::argument(
+                "--period",
+                period,
+                "a period holds at least 2 samples",
+            ));
+        }
+        if let Some(l) = &self.lines {
+            if let Some(&k) = l.iter().find(|&&k| k == 0 || 2 * k >= period) {
+                return Err(FrfitError::argument(
+                    "--lines",
+                    k,
+                    format!(
+                        "an excited line is a DFT bin between 1 and {} (below Nyquist for a period of {period} samples)",
+                        (period - 1) / 2
+                    ),
+                ));
+            }
+        }
+        Ok(RecordConfig {
+            fs,
+            period,
+            drop_periods: self.drop_periods,
+            bins: self.lines.clone(),
+            line_threshold_db: self.line_threshold_db,
+        })
+    }
+}
+
+/// A signal spec with an optional leading `-`: (sign, name).
+pub fn signed(spec: &str) -> (f64, &str) {
+    match spec.trim().strip_prefix('-') {
+        Some(rest) => (-1.0, rest.trim()),
+        None => (1.0, spec.trim()),
+    }
+}
+
+/// Whether `p` has the `.mat` extension.
+pub fn is_mat(p: &Path) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mat"))
+}
+
+/// Periodic spectra from `.mat` time records, one file per experiment, and notes on what
+/// was skipped in the files.
+pub fn spectra_from_mat_files(
+    files: &[PathBuf],
+    spec: &RecordSpec,
+) -> Result<(PeriodicSpectra, Vec<String>), FrfitError> {
+    if spec.inputs.is_empty() || spec.outputs.is_empty() {
+        return Err(FrfitError::argument(
+            "--input/--output",
+            format!("{:?} / {:?}", spec.inputs, spec.outputs),
+            "name the input and output signals of the .mat files (e.g. --input iq_adx --output theta_mx,theta_my)",
+        ));
+    }
+    let mut experiments = Vec::with_capacity(files.len());
+    let mut fs_file = None;
+    let mut notes = Vec::new();
+    for f in files {
+        if !is_mat(f) {
+            return Err(FrfitError::argument(
+                "files",
+                f.display(),
+                "mix of file kinds: give either .mat files or one periodic spectra .csv",
+            ));
+        }
+        let m = MatFile::read(f)?;
+        if fs_file.is_none() {
+            fs_file = m.scalar("fs");
+        }
+        let get = |spec: &String| -> Result<Vec<f64>, FrfitError> {
+            let (s, name) = signed(spec);
+            let mut x = m.signal(name)?;
+            if s < 0.0 {
+                x.iter_mut().for_each(|v| *v = -*v);
+            }
+            Ok(x)
+        };
+        let inputs = spec.inputs.iter().map(get).collect::<Result<Vec<_>, _>>()?;
+        let outputs = spec
+            .outputs
+            .iter()
+            .map(get)
+            .collect::<Result<Vec<_>, _>>()?;
+        if !m.skipped.is_empty() {
+            notes.push(format!(
+                "{}: skipped non-numeric variables {}",
+                f.display(),
+                m.skipped
+                    .iter()
+                    .map(|(n, k)| format!("{n} ({k})"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+        experiments.push(ExperimentRecords { inputs, outputs });
+    }
+    let fs = match (spec.fs, fs_file) {
+        (Some(v), _) | (None, Some(v)) => v,
+        (None, None) => {
+            return Err(FrfitError::argument(
+                "--fs",
+                "missing",
+                "give the sample rate (the .mat file has no scalar `fs`)",
+            ))
+        }
+    };
+    let cfg = spec.record_config(fs)?;
+    let spectra = spectra_from_records(&experiments, &cfg)?;
+    Ok((spectra, notes))
+}
+
+/// Periodic spectra from time records held in memory: `experiments[e]` holds the input
+/// and output channels of experiment `e`; `spec.fs` is required.
+pub fn spectra_from_arrays(
+    experiments: &[ExperimentRecords],
+    spec: &RecordSpec,
+) -> Result<PeriodicSpectra, FrfitError> {
+    let fs = spec.fs.ok_or_else(|| {
+        FrfitError::argument("fs", "missing", "give the sample rate of the records, Hz")
+    })?;
+    let cfg = spec.record_config(fs)?;
+    Ok(spectra_from_records(experiments, &cfg)?)
+}
+
+/// The periodic spectra of `files`: `.mat` time records (one per experiment) or one
+/// periodic spectra CSV; notes on what was skipped.
+pub fn spectra_from_files(
+    files: &[PathBuf],
+    spec: &RecordSpec,
+) -> Result<(PeriodicSpectra, Vec<String>), FrfitError> {
+    for f in files {
+        if !f.is_file() {
+            return Err(FrfitError::Io {
+                path: f.display().to_string(),
+                message: "no such file".into(),
+            });
+        }
+    }
+    if files.iter().any(|f| is_mat(f)) {
+        return spectra_from_mat_files(files, spec);
+    }
+    if files.len() != 1 {
+        return Err(FrfitError::argument(
+            "files",
+            files.len(),
+            "give one periodic spectra CSV (it holds every experiment and realization)",
+        ));
+    }
+    Ok((read_spectra_csv(&files[0])?, Vec::new()))
+}
+
+/// The estimate and the comment lines an FRF CSV of it carries (sources, signals, the
+/// spectra's own comments, `notes`, and how the variance was estimated).
+pub struct Estimated {
+    /// The estimate: the FRF with its variance, the separate noise and total variances.
+    pub estimate: NonparametricFrf,
+    /// Comment lines for the FRF CSV.
+    pub comments: Vec<String>,
+}
+
+/// Estimates the FRF of `spectra` (every realization, every period) and describes it:
+/// `sources` are what the spectra were read from, `spec` the signals.
+pub fn estimate_described(
+    spectra: &PeriodicSpectra,
+    sources: &[String],
+    spec: &RecordSpec,
+    mut notes: Vec<String>,
+) -> Result<Estimated, FrfitError> {
+    let est = estimate(spectra, &EstimatorConfig::default())?;
+    let mut comments = vec![format!("nonparametric FRF of {}", sources.join(", "))];
+    if !spec.inputs.is_empty() {
+        comments.push(format!(
+            "inputs {}; outputs {}",
+            spec.inputs.join(","),
+            spec.outputs.join(",")
+        ));
+    }
+    comments.extend(spectra.comments.iter().cloned());
+    comments.append(&mut notes);
+    comments.push(format!(
+        "estimator: G = mean_p(Y_p) mean_p(U_p)^-1 per realization, mean over {} realization(s); {} periods, {} experiment(s); variance: {}",
+        est.realizations,
+        est.periods,
+        est.n_experiments,
+        est.frf.metadata.get("variance").cloned().unwrap_or_default()
+    ));
+    Ok(Estimated {
+        estimate: est,
+        comments,
+    })
+}
+
+/// Parses the excited DFT bins: comma-separated bins `K` or ranges `A-B` (inclusive) with
+/// an optional step `A-B/S` (`1-999/2`: the odd bins of an odd multisine).
+pub fn parse_lines(s: &str) -> Result<Vec<usize>, String> {
+    let num = |t: &str, what: &str| -> Result<usize, String> {
+        t.trim()
+            .parse::<usize>()
+            .map_err(|_| format!("{what} `{}` in `{s}` is not a whole number", t.trim()))
+    };
+    let mut out = Vec::new();
+    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (range, step) = match part.split_once('/') {
+            Some((r, st)) => (r, num(st, "step")?),
+            None => (part, 1),
+        };
+        if step == 0 {
+            return Err(format!("step 0 in `{part}` of `{s}`"));
+        }
+        match range.split_once('-') {
+            Some((a, b)) => {
+                let (a, b) = (num(a, "bin")?, num(b, "bin")?);
+                if a > b {
+                    return Err(format!("range `{part}` of `{s}` runs downwards"));
+                }
+                out.extend((a..=b).step_by(step));
+            }
+            None => out.push(num(range, "bin")?),
+        }
+    }
+    if out.is_empty() {
+        return Err(format!("no line in `{s}`"));
+    }
+    out.sort_unstable();
+    out.dedup();
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lines_and_signs() {
+        assert_eq!(parse_lines("3,1,2"), Ok(vec![1, 2, 3]));
+        assert_eq!(parse_lines("1-9/2"), Ok(vec![1, 3, 5, 7, 9]));
+        assert_eq!(parse_lines("5-7, 2"), Ok(vec![2, 5, 6, 7]));
+        assert!(parse_lines("x").unwrap_err().contains("whole number"));
+        assert!(parse_lines("9-1").unwrap_err().contains("downwards"));
+        assert!(parse_lines("1-3/0").is_err());
+        assert!(parse_lines(",").is_err());
+        assert_eq!(signed("-theta_my"), (-1.0, "theta_my"));
+        assert_eq!(signed(" x:3"), (1.0, "x:3"));
+        let spec = RecordSpec {
+            period: Some(100),
+            lines: Some(vec![1, 50]),
+            ..Default::default()
+        };
+        let e = spec.record_config(1000.0).unwrap_err().to_string();
+        assert!(e.contains("--lines") && e.contains("50"), "{e}");
+        let spec = RecordSpec::default();
+        assert!(spec
+            .record_config(1000.0)
+            .unwrap_err()
+            .to_string()
+            .contains("--period"));
+    }
+}
