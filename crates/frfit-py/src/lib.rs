@@ -63,6 +63,7 @@ fn _frfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<run::Reduction>()?;
     m.add_function(wrap_pyfunction!(data::read, m)?)?;
     m.add_function(wrap_pyfunction!(data::nonparametric, m)?)?;
+    m.add_function(wrap_pyfunction!(data::simulate_random_modal, m)?)?;
     m.add_function(wrap_pyfunction!(model::load_model, m)?)?;
     m.add_function(wrap_pyfunction!(run::fit, m)?)?;
     m.add_function(wrap_pyfunction!(run::diagnose, m)?)?;

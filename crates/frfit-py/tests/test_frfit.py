@@ -325,3 +325,19 @@ def test_diagnose_starts_where_fit_ends_on_complex_mode_shapes():
     assert rel_err(fitted.response(FREQ), g0) < 1e-4
     d = frfit.diagnose(data)
     assert d.initial_errors.median_rel <= 1.02 * rel_err(fitted.response(FREQ), data.G)
+
+
+def test_the_simulator_truth_is_recovered_and_the_example_runs():
+    import importlib.util
+    import pathlib
+
+    control = pytest.importorskip("control")
+    path = pathlib.Path(__file__).parent.parent / "examples" / "fit_from_arrays.py"
+    spec = importlib.util.spec_from_file_location("fit_from_arrays", path)
+    ex = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ex)
+    model, sys, diff = ex.main()
+    assert isinstance(sys, control.StateSpace)
+    assert diff < 1e-9
+    assert len(model.modes) == 17
+    assert all(m.f_hz_std is not None and m.f_hz_std > 0 for m in model.modes)

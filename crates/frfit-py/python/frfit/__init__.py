@@ -39,6 +39,7 @@ from ._frfit import (
     nonparametric,
     read,
     reduce,
+    simulate_random_modal,
     validate,
 )
 
@@ -60,5 +61,6 @@ __all__ = [
     "nonparametric",
     "read",
     "reduce",
+    "simulate_random_modal",
     "validate",
 ]

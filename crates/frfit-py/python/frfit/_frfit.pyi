@@ -201,3 +201,15 @@ def diagnose(
 def validate(model: Model, data: FrfData, alpha: float = 0.99, method: str = "closed-form") -> Validation: ...
 def reduce(model: Model, order: Optional[int] = None) -> Reduction: ...
 def load_model(path: _Path) -> Model: ...
+def simulate_random_modal(
+    ny: int = 4,
+    nu: int = 4,
+    modes: int = 10,
+    lines: int = 4000,
+    band: Tuple[float, float] = (50.0, 2000.0),
+    noise: float = 1e-3,
+    rigid_body: bool = False,
+    close_pairs: float = 0.1,
+    damping: Tuple[float, float] = (0.002, 0.02),
+    seed: int = 1,
+) -> Tuple[FrfData, FrfData, Dict[str, Any]]: ...

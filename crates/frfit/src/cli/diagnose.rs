@@ -3,7 +3,7 @@
 //! add each one that explains more than noise, and report the error before and after.
 
 use super::common::load_data;
-use super::model_opts::{check_options, progress, FitOptions};
+use super::model_opts::{progress, FitOptions};
 use super::output::{print_fit, write_outputs};
 use super::validate;
 use clap::Args as ClapArgs;
@@ -44,19 +44,11 @@ pub struct Args {
 /// Runs `frfit diagnose`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     let data = load_data(&args.data)?;
-    check_options(&args.opts, &data)?;
-    let mut cfg = args.opts.pipeline_config();
+    let mut spec = args.opts.spec();
+    spec.fs_hz = args.fs;
+    spec.check(&data)?;
+    let mut cfg = spec.pipeline_config();
     cfg.diagnose = true;
-    if let Some(fs) = args.fs {
-        if !(fs.is_finite() && fs > 0.0) {
-            return Err(FrfitError::argument(
-                "--fs",
-                fs,
-                "must be a sample rate > 0 Hz",
-            ));
-        }
-        cfg.fs_hz = Some(fs);
-    }
     if let Some(p) = &args.model {
         let f = ModelFile::read(p)
             .map_err(|e| FrfitError::argument("--model", p.display(), e.to_string()))?;
