@@ -68,6 +68,16 @@ pub trait FrfDataset {
         }
         true
     }
+    /// True when the variance is the total variance of a best linear approximation and
+    /// its noise part is known (`_var_noise` columns; several realizations averaged).
+    fn has_noise_variance(&self) -> bool {
+        false
+    }
+    /// The noise part of the variance of line `k` in `vec` order into `out`; false (and
+    /// `out` untouched) when the data carry none.
+    fn noise_variance_line_into(&self, _k: usize, _out: &mut [f64]) -> bool {
+        false
+    }
     /// The matrix `G` at line `k`.
     fn matrix(&self, k: usize) -> Mat<C64> {
         Mat::from_fn(self.ny(), self.nu(), |i, j| self.value(k, i, j))
@@ -104,6 +114,16 @@ pub trait FrfDataset {
             self.variance_vec(),
         )
         .expect("a valid dataset copies into a valid Frf");
+        if self.has_noise_variance() {
+            let m = self.n_entries();
+            let mut noise = vec![0.0; m * self.n_lines()];
+            for k in 0..self.n_lines() {
+                self.noise_variance_line_into(k, &mut noise[k * m..(k + 1) * m]);
+            }
+            f = f
+                .with_noise_variance(Some(noise))
+                .expect("a valid dataset's noise variance copies into a valid Frf");
+        }
         f.units = self.units().map(str::to_string);
         f
     }

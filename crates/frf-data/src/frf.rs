@@ -315,4 +315,15 @@ impl FrfDataset for Frf {
     fn to_frf(&self) -> Frf {
         self.clone()
     }
+    fn has_noise_variance(&self) -> bool {
+        self.noise_variance.is_some()
+    }
+    fn noise_variance_line_into(&self, k: usize, out: &mut [f64]) -> bool {
+        let Some(v) = &self.noise_variance else {
+            return false;
+        };
+        let m = self.ny * self.nu;
+        out.copy_from_slice(&v[k * m..(k + 1) * m]);
+        true
+    }
 }

@@ -130,4 +130,21 @@ impl FrfDataset for FrfView<'_> {
     fn units(&self) -> Option<&str> {
         self.base.units()
     }
+    fn has_noise_variance(&self) -> bool {
+        self.base.has_noise_variance()
+    }
+    fn noise_variance_line_into(&self, k: usize, out: &mut [f64]) -> bool {
+        let Some(v) = self.base.noise_variances() else {
+            return false;
+        };
+        let (bny, bm) = (self.base.ny(), self.base.n_entries());
+        let row = &v[(self.lines.start + k) * bm..(self.lines.start + k + 1) * bm];
+        let ny = self.outputs.len();
+        for (j, &bj) in self.inputs.iter().enumerate() {
+            for (i, &bi) in self.outputs.iter().enumerate() {
+                out[j * ny + i] = row[bj * bny + bi];
+            }
+        }
+        true
+    }
 }

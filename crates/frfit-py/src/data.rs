@@ -249,19 +249,10 @@ impl FrfData {
     fn source(&self) -> Option<String> {
         self.inner.source.clone()
     }
-    /// Writes the data as an FRF CSV (FORMATS.md: `_var` columns when present, the
-    /// comments as comment lines; the noise part of the variance is not written yet).
+    /// Writes the data as an FRF CSV (FORMATS.md: `_var` and `_var_noise` columns when
+    /// present, the comments as comment lines).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let f = &self.inner;
-        if f.noise_variances().is_some() {
-            let w = py.get_type::<pyo3::exceptions::PyUserWarning>();
-            PyErr::warn(
-                py,
-                &w,
-                c"the FRF CSV writer does not write `_var_noise` yet: the file holds the total variance (`_var`) only",
-                1,
-            )?;
-        }
         py.detach(|| frf_data::io::write_frf_csv(&path, f, &f.comments))
             .map_err(data_err)
     }
@@ -348,9 +339,12 @@ fn records(
 /// experiments)` or `(n_samples, channels, experiments, periods)` (then a period is
 /// `n_samples` long and `period` may be omitted). `fs` is the sample rate, Hz; `period`
 /// the samples per period; `drop_periods` leading periods are dropped as transient;
-/// `lines` gives the excited DFT bins (else they are found from the input spectrum).
+/// `lines` gives the excited DFT bins (else they are found from the input spectrum);
+/// `realizations` how many random-phase realizations the experiments form, as
+/// consecutive blocks (default: blocks of `nu` experiments). With two or more, `var` is
+/// the total variance (noise and nonlinear distortion) and `var_noise` its noise part.
 #[pyfunction]
-#[pyo3(signature = (u, y, fs, period=None, drop_periods=0, lines=None, line_threshold_db=40.0))]
+#[pyo3(signature = (u, y, fs, period=None, drop_periods=0, lines=None, line_threshold_db=40.0, realizations=None))]
 pub fn nonparametric(
     py: Python<'_>,
     u: &Bound<'_, PyAny>,
@@ -360,6 +354,7 @@ pub fn nonparametric(
     drop_periods: usize,
     lines: Option<Vec<usize>>,
     line_threshold_db: f64,
+    realizations: Option<usize>,
 ) -> PyResult<FrfData> {
     let (ins, pu) = records(py, u, "u")?;
     let (outs, py_) = records(py, y, "y")?;
@@ -384,6 +379,7 @@ pub fn nonparametric(
         drop_periods,
         lines,
         line_threshold_db,
+        realizations,
         ..Default::default()
     };
     let Estimated { estimate, comments } = py

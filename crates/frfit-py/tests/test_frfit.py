@@ -343,3 +343,41 @@ def test_the_simulator_truth_is_recovered_and_the_example_runs():
     assert diff < 1e-9
     assert len(model.modes) == 17
     assert all(m.f_hz_std is not None and m.f_hz_std > 0 for m in model.modes)
+
+
+def test_realizations_separate_the_nonlinear_distortion_from_the_noise(tmp_path):
+    # 2 realizations x 3 experiments of a 3-input system, 4 periods each; a static cubic
+    # term on the outputs makes a stochastic nonlinear contribution that is periodic (the
+    # period spread cannot see it) but changes with the random phases
+    fs, n, periods = 2000.0, 1000, 4
+    bins = np.arange(10, 300, 3)
+    rng = np.random.default_rng(8)
+    g = plant(bins * fs / n)
+    u = np.zeros((n, 3, 6, periods))
+    y = np.zeros((n, 2, 6, periods))
+    for e in range(6):
+        us = np.stack([_multisine(fs, n, bins, rng) for _ in range(3)], axis=1)
+        uf = np.fft.rfft(us, axis=0)
+        yf = np.zeros((n // 2 + 1, 2), dtype=complex)
+        yf[bins] = np.einsum("kij,kj->ki", g, uf[bins])
+        ys = np.fft.irfft(yf, n, axis=0)
+        ys = ys + 0.02 * ys**3 / np.std(ys) ** 2
+        for p in range(periods):
+            u[:, :, e, p] = us
+            y[:, :, e, p] = ys + 1e-5 * np.std(ys) * rng.normal(size=ys.shape)
+    est = frfit.nonparametric(u, y, fs=fs)
+    assert est.metadata["realizations"] == "2"
+    assert est.var_noise is not None and est.var is not None
+    ratio = np.median(est.var / est.var_noise)
+    assert ratio > 10, ratio  # the distortion is far above the noise
+    # one realization: the variance is the noise variance only, and there is no noise part
+    one = frfit.nonparametric(u, y, fs=fs, realizations=1)
+    assert one.var_noise is None and np.median(one.var / est.var_noise) < 3
+    # the CSV keeps both variances
+    path = tmp_path / "bla.csv"
+    est.save(path)
+    back = frfit.read(path)
+    np.testing.assert_array_equal(back.var_noise, est.var_noise)
+    np.testing.assert_array_equal(back.var, est.var)
+    with pytest.raises(frfit.FrfitError, match="full rank"):
+        frfit.nonparametric(u, y, fs=fs, realizations=3)

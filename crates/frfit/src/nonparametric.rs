@@ -10,7 +10,9 @@ use experiment::nonparametric::spectra_csv::read_spectra_csv;
 use experiment::nonparametric::time_records::{
     spectra_from_records, ExperimentRecords, RecordConfig,
 };
-use experiment::nonparametric::{estimate, EstimatorConfig, NonparametricFrf, PeriodicSpectra};
+use experiment::nonparametric::{
+    estimate, EstimatorConfig, NonparametricFrf, PeriodicSpectra, RealizationSpectra,
+};
 use std::path::{Path, PathBuf};
 
 /// How to read and cut time records.
@@ -32,6 +34,10 @@ pub struct RecordSpec {
     pub lines: Option<Vec<usize>>,
     /// Window of the line detection, dB below the strongest line. Default 40.
     pub line_threshold_db: f64,
+    /// How many random-phase realizations the experiments form (consecutive blocks of
+    /// experiments, [`group_realizations`]). Default: blocks of `nu` experiments, one
+    /// realization per block (`nu` orthogonal experiments each).
+    pub realizations: Option<usize>,
 }
 
 impl Default for RecordSpec {
@@ -44,6 +50,7 @@ impl Default for RecordSpec {
             drop_periods: 0,
             lines: None,
             line_threshold_db: 40.0,
+            realizations: None,
         }
     }
 }
@@ -176,7 +183,7 @@ pub fn spectra_from_mat_files(
     };
     let cfg = spec.record_config(fs)?;
     let spectra = spectra_from_records(&experiments, &cfg)?;
-    Ok((spectra, notes))
+    Ok((group_realizations(spectra, spec.realizations)?, notes))
 }
 
 /// Periodic spectra from time records held in memory: `experiments[e]` holds the input
@@ -189,7 +196,108 @@ pub fn spectra_from_arrays(
         FrfitError::argument("fs", "missing", "give the sample rate of the records, Hz")
     })?;
     let cfg = spec.record_config(fs)?;
-    Ok(spectra_from_records(experiments, &cfg)?)
+    let spectra = spectra_from_records(experiments, &cfg)?;
+    group_realizations(spectra, spec.realizations)
+}
+
+/// Groups the experiments of time records into random-phase realizations (the robust
+/// method of Pintelon and Schoukens, *System Identification: A Frequency Domain
+/// Approach*, 2nd ed., section 3.7 and chapter 4): experiment `e` belongs to
+/// realization `e / (E / R)` (consecutive blocks). Each realization's `E / R`
+/// experiments must excite every input (at least `nu` of them; the estimator checks the
+/// rank of the inputs line by line). With `R >= 2` the estimate's variance is the total
+/// variance from the spread over realizations (noise and stochastic nonlinear
+/// distortion) and its noise part comes from the spread over periods.
+///
+/// `realizations`: `R`; `None` takes blocks of `nu` experiments (`R = E / nu`), which
+/// for 6 experiments of a 3-input system are 2 realizations of 3 orthogonal experiments.
+/// Spectra that already hold several realizations (a spectra CSV) are returned as they
+/// are when `realizations` is `None` or their count.
+pub fn group_realizations(
+    spectra: PeriodicSpectra,
+    realizations: Option<usize>,
+) -> Result<PeriodicSpectra, FrfitError> {
+    let have = spectra.realizations.len();
+    if have != 1 {
+        return match realizations {
+            None => Ok(spectra),
+            Some(r) if r == have => Ok(spectra),
+            Some(r) => Err(FrfitError::argument(
+                "--realizations",
+                r,
+                format!("the spectra already hold {have} realizations"),
+            )),
+        };
+    }
+    let (nu, ny) = (spectra.nu, spectra.ny);
+    let rs = &spectra.realizations[0];
+    let (ne, np, nl) = (rs.n_experiments(), rs.periods(), rs.n_lines());
+    let r = match realizations {
+        Some(0) => {
+            return Err(FrfitError::argument(
+                "--realizations",
+                0,
+                "at least one realization",
+            ))
+        }
+        Some(r) => r,
+        None if ne % nu == 0 => ne / nu,
+        None => {
+            return Err(FrfitError::argument(
+                "--realizations",
+                "by default: experiments / inputs",
+                format!(
+                    "{ne} experiment(s) of {nu} input(s) do not form whole realizations of {nu} \
+                     experiments each; say how many realizations they are (--realizations R, \
+                     R dividing {ne})"
+                ),
+            ))
+        }
+    };
+    if ne % r != 0 {
+        return Err(FrfitError::argument(
+            "--realizations",
+            r,
+            format!("{ne} experiment(s) do not split into {r} realizations of equal size"),
+        ));
+    }
+    let per = ne / r;
+    if per < nu {
+        return Err(FrfitError::argument(
+            "--realizations",
+            r,
+            format!(
+                "each realization would hold {per} experiment(s), fewer than the {nu} inputs: \
+                 the inputs of a realization must have full rank"
+            ),
+        ));
+    }
+    if r == 1 {
+        return Ok(spectra);
+    }
+    let (bi, bo) = (per * np * nl * nu, per * np * nl * ny);
+    let reference = rs.reference.as_ref();
+    let groups = (0..r)
+        .map(|g| {
+            RealizationSpectra::new(
+                per,
+                np,
+                nl,
+                ny,
+                nu,
+                rs.input[g * bi..(g + 1) * bi].to_vec(),
+                rs.output[g * bo..(g + 1) * bo].to_vec(),
+                reference.map(|x| x[g * per * nl * nu..(g + 1) * per * nl * nu].to_vec()),
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut out = PeriodicSpectra::new(spectra.freq_hz.clone(), ny, nu, groups)?;
+    out.units = spectra.units.clone();
+    out.comments = spectra.comments.clone();
+    out.comments.push(format!(
+        "{r} realizations of {per} experiment(s) each (consecutive blocks of the {ne} experiments)"
+    ));
+    Ok(out)
 }
 
 /// The periodic spectra of `files`: `.mat` time records (one per experiment) or one
@@ -324,5 +432,61 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("--period"));
+    }
+
+    /// Spectra of `ne` experiments of a `ny x nu` system in one realization.
+    fn one_realization(ne: usize, nu: usize) -> PeriodicSpectra {
+        let (ny, np, nl) = (2, 2, 3);
+        let z = |i: usize| frf_data::C64::new(1.0 + i as f64, 0.5);
+        let input = (0..ne * np * nl * nu).map(z).collect();
+        let output = (0..ne * np * nl * ny).map(z).collect();
+        let rs = RealizationSpectra::new(ne, np, nl, ny, nu, input, output, None).unwrap();
+        PeriodicSpectra::new(vec![1.0, 2.0, 3.0], ny, nu, vec![rs]).unwrap()
+    }
+
+    #[test]
+    fn experiments_group_into_realizations_of_whole_blocks() {
+        // 6 experiments of 3 inputs: 2 realizations by default, the blocks in order
+        let s = one_realization(6, 3);
+        let g = group_realizations(s.clone(), None).unwrap();
+        assert_eq!(g.realizations.len(), 2);
+        assert_eq!(g.realizations[0].n_experiments(), 3);
+        let half = s.realizations[0].input.len() / 2;
+        assert_eq!(g.realizations[1].input[..], s.realizations[0].input[half..]);
+        assert_eq!(
+            group_realizations(s.clone(), Some(1))
+                .unwrap()
+                .realizations
+                .len(),
+            1
+        );
+        // errors name the option and say why
+        let e = group_realizations(s.clone(), Some(4))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--realizations") && e.contains("equal size"),
+            "{e}"
+        );
+        let e = group_realizations(s.clone(), Some(3))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("full rank"), "{e}");
+        let e = group_realizations(one_realization(4, 3), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("do not form whole realizations"), "{e}");
+        // SISO: every experiment is a realization
+        assert_eq!(
+            group_realizations(one_realization(3, 1), None)
+                .unwrap()
+                .realizations
+                .len(),
+            3
+        );
+        // spectra that hold realizations already are kept
+        let two = group_realizations(s, None).unwrap();
+        assert_eq!(group_realizations(two.clone(), None).unwrap(), two);
+        assert!(group_realizations(two, Some(3)).is_err());
     }
 }

@@ -6,7 +6,7 @@
 //! ```text
 //! # free text; key=value words are metadata: ny=4 nu=13 units=m/N
 //! # key: value lines are metadata too
-//! freq_hz,G1_1_re,G1_1_im,...,G4_13_im[,G1_1_var,...]
+//! freq_hz,G1_1_re,G1_1_im,...,G4_13_im[,G1_1_var,...[,G1_1_var_noise,...]]
 //! 2.5e-1,-1.98e-6,1.02e-8,...
 //! ```
 //!
@@ -24,6 +24,8 @@ enum Part {
     Re,
     Im,
     Var,
+    /// The noise part of a total variance (`_var_noise`, FORMATS.md).
+    VarNoise,
 }
 
 impl Part {
@@ -32,6 +34,7 @@ impl Part {
             Part::Re => "re",
             Part::Im => "im",
             Part::Var => "var",
+            Part::VarNoise => "var_noise",
         }
     }
 }
@@ -43,6 +46,7 @@ enum Target {
     Re(usize),
     Im(usize),
     Var(usize),
+    VarNoise(usize),
 }
 
 /// The name of the column holding `part` of entry `(out, inp)` (1-based indices).
@@ -61,6 +65,10 @@ fn parse_index(s: &str) -> Option<usize> {
 /// Parses `G{out}_{in}_{re|im|var}`; indices may be 0 here (the caller rejects them).
 fn parse_entry_column(name: &str) -> Option<(usize, usize, Part)> {
     let rest = name.strip_prefix('G')?;
+    if let Some(idx) = rest.strip_suffix("_var_noise") {
+        let (out, inp) = idx.split_once('_')?;
+        return Some((parse_index(out)?, parse_index(inp)?, Part::VarNoise));
+    }
     let (idx, suffix) = rest.rsplit_once('_')?;
     let part = match suffix {
         "re" => Part::Re,
@@ -127,6 +135,8 @@ struct Header<'a> {
     ny: usize,
     nu: usize,
     has_var: bool,
+    /// `_var_noise` columns beside the `_var` ones.
+    has_noise: bool,
 }
 
 fn parse_header<'a>(file: &str, line_no: usize, line: &'a str) -> Result<Header<'a>, FrfError> {
@@ -165,7 +175,7 @@ fn parse_header<'a>(file: &str, line_no: usize, line: &'a str) -> Result<Header<
                 Some(name),
                 FormatProblem::BadHeader,
                 format!(
-                    "unknown column `{name}` (expected `freq_hz` or `G<out>_<in>_re`, `_im`, `_var`)"
+                    "unknown column `{name}` (expected `freq_hz` or `G<out>_<in>_re`, `_im`, `_var`, `_var_noise`)"
                 ),
             ));
         };
@@ -246,6 +256,39 @@ fn parse_header<'a>(file: &str, line_no: usize, line: &'a str) -> Result<Header<
             }
         }
     }
+    let n_noise = entries
+        .iter()
+        .filter(|e| matches!(e, Some((_, _, Part::VarNoise))))
+        .count();
+    let has_noise = n_noise > 0;
+    if has_noise {
+        if !has_var {
+            let col = column_name(1, 1, Part::VarNoise);
+            return Err(err(
+                Some(&col),
+                FormatProblem::InconsistentVariance,
+                "`_var_noise` columns (the noise part of a total variance) need the `_var` \
+                 columns beside them"
+                    .into(),
+            ));
+        }
+        for inp in 1..=nu {
+            for out in 1..=ny {
+                if !seen_entries.contains(&(out, inp, Part::VarNoise)) {
+                    let col = column_name(out, inp, Part::VarNoise);
+                    return Err(err(
+                        Some(&col),
+                        FormatProblem::InconsistentVariance,
+                        format!(
+                            "column `{col}` is missing: {n_noise} of the {} entries carry a \
+                             `_var_noise` column; either all entries carry one or none does",
+                            ny * nu
+                        ),
+                    ));
+                }
+            }
+        }
+    }
     let targets = entries
         .iter()
         .enumerate()
@@ -260,6 +303,7 @@ fn parse_header<'a>(file: &str, line_no: usize, line: &'a str) -> Result<Header<
                     Part::Re => Target::Re(e),
                     Part::Im => Target::Im(e),
                     Part::Var => Target::Var(e),
+                    Part::VarNoise => Target::VarNoise(e),
                 }
             }
         })
@@ -270,6 +314,7 @@ fn parse_header<'a>(file: &str, line_no: usize, line: &'a str) -> Result<Header<
         ny,
         nu,
         has_var,
+        has_noise,
     })
 }
 
@@ -371,6 +416,7 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
         ny,
         nu,
         has_var,
+        has_noise,
     } = parse_header(name, header_line, header_text)?;
     check_announced_dims(name, header_line, &metadata, ny, nu)?;
     let m = ny * nu;
@@ -395,7 +441,9 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
     let n_data = data_lines.len();
     let zero = C64::new(0.0, 0.0);
     let mut values: Vec<C64> = vec![zero; n_data * m];
-    let mut variance: Vec<f64> = vec![0.0; if has_var { n_data * m } else { 0 }];
+    // per line the variances, then (with `_var_noise`) their noise parts: `w` numbers
+    let w = if has_noise { 2 * m } else { m };
+    let mut variance: Vec<f64> = vec![0.0; if has_var { n_data * w } else { 0 }];
     let mut parsed_freqs: Vec<f64> = vec![f64::NAN; n_data];
     let ctx = LineParser {
         name,
@@ -411,7 +459,7 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
                 let k = b * block + i;
                 let (line_no, line) = data_lines[k];
                 let var_row = if has_var {
-                    &mut var[i * m..(i + 1) * m]
+                    &mut var[i * w..(i + 1) * w]
                 } else {
                     &mut []
                 };
@@ -426,7 +474,7 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
             values
                 .par_chunks_mut(block * m.max(1))
                 .zip(parsed_freqs.par_chunks_mut(block))
-                .zip(variance.par_chunks_mut(block * m.max(1)))
+                .zip(variance.par_chunks_mut(block * w.max(1)))
                 .enumerate()
                 .filter_map(|(b, ((vals, fr), var))| run((b, (vals, fr)), var))
                 .collect()
@@ -501,7 +549,20 @@ pub fn parse_frf_csv(text: &str, name: &str) -> Result<Frf, FrfError> {
             "the file has a header but no data lines",
         ));
     }
-    let mut frf = Frf::new(freqs, ny, nu, values, has_var.then_some(variance))?;
+    let noise = has_noise.then(|| {
+        let (mut var, mut noise) = (
+            Vec::with_capacity(n_data * m),
+            Vec::with_capacity(n_data * m),
+        );
+        for row in variance.chunks(w) {
+            var.extend_from_slice(&row[..m]);
+            noise.extend_from_slice(&row[m..]);
+        }
+        variance = var;
+        noise
+    });
+    let mut frf =
+        Frf::new(freqs, ny, nu, values, has_var.then_some(variance))?.with_noise_variance(noise)?;
     frf.units = metadata.get("units").cloned();
     metadata.insert("csv.dialect".to_string(), dialect.to_string());
     frf.metadata = metadata;
@@ -587,6 +648,16 @@ impl LineParser<'_> {
                     }
                     row_var[e] = x;
                 }
+                Target::VarNoise(e) => {
+                    if x < 0.0 {
+                        return Err(err(
+                            c,
+                            FormatProblem::NegativeVariance,
+                            format!("noise variance {} is negative", shown(field)),
+                        ));
+                    }
+                    row_var[self.m + e] = x;
+                }
             }
         }
         if fields.next().is_some() {
@@ -634,14 +705,16 @@ fn is_word_safe(units: &str) -> bool {
 /// `=`) and
 /// `dc=allowed` when the first line is at 0 Hz, then the header: `freq_hz`, the
 /// `_re`/`_im` pairs column-major by entry (`G1_1`, `G2_1`, ..., `G1_2`, ...), then the
-/// `_var` columns in the same order when the data carry variances. Numbers use Rust's
+/// `_var` columns in the same order when the data carry variances, and the `_var_noise`
+/// columns (the noise part of a total variance) when they carry that too. Numbers use Rust's
 /// shortest round-trip formatting (`{:e}`), so [`parse_frf_csv`] gives back the very
 /// same bits (non-finite values, which an [`Frf`] cannot hold, would not read back).
 pub fn frf_csv_string<D: FrfDataset + ?Sized>(data: &D, comments: &[String]) -> String {
     let (ny, nu, n) = (data.ny(), data.nu(), data.n_lines());
     let m = ny * nu;
     let has_var = data.has_variance();
-    let n_cols = 1 + m * if has_var { 3 } else { 2 };
+    let has_noise = has_var && data.has_noise_variance();
+    let n_cols = 1 + m * (2 + usize::from(has_var) + usize::from(has_noise));
     let mut s = String::with_capacity(256 + n_cols * 16 + n * n_cols * 24);
     for c in comments {
         if is_generated_line(c) {
@@ -690,6 +763,13 @@ pub fn frf_csv_string<D: FrfDataset + ?Sized>(data: &D, comments: &[String]) -> 
             }
         }
     }
+    if has_noise {
+        for j in 1..=nu {
+            for i in 1..=ny {
+                let _ = write!(s, ",G{i}_{j}_var_noise");
+            }
+        }
+    }
     s.push('\n');
     let mut line = vec![C64::new(0.0, 0.0); m];
     let mut var = vec![0.0; m];
@@ -700,6 +780,11 @@ pub fn frf_csv_string<D: FrfDataset + ?Sized>(data: &D, comments: &[String]) -> 
             let _ = write!(s, ",{:e},{:e}", z.re, z.im);
         }
         if has_var && data.variance_line_into(k, &mut var) {
+            for v in &var {
+                let _ = write!(s, ",{v:e}");
+            }
+        }
+        if has_noise && data.noise_variance_line_into(k, &mut var) {
             for v in &var {
                 let _ = write!(s, ",{v:e}");
             }
@@ -863,5 +948,59 @@ mod tests {
         let back = parse_frf_csv(&frf_csv_string(&f, &[]), "mem").unwrap();
         assert_eq!(back.units.as_deref(), Some("V,A"));
         assert_eq!(back.freq_hz_slice(), &[0.0, 1.0]);
+    }
+
+    /// `_var_noise` columns (the noise part of a total variance) read back bit for bit,
+    /// need `_var` beside them and every entry, and are written only when present.
+    #[test]
+    fn noise_variance_columns_round_trip_and_are_checked() {
+        let f = Frf::new(
+            vec![1.0, 2.0],
+            2,
+            1,
+            vec![C64::new(1.0, -0.5); 4],
+            Some(vec![0.3, 0.1, 0.25, 0.125]),
+        )
+        .unwrap()
+        .with_noise_variance(Some(vec![0.1, 0.05, 0.2, 1e-3]))
+        .unwrap();
+        let text = frf_csv_string(&f, &[]);
+        assert!(text.contains(",G2_1_var_noise\n"), "{text}");
+        let back = parse_frf_csv(&text, "t.csv").unwrap();
+        assert_eq!(back.variances(), f.variances());
+        assert_eq!(back.noise_variances(), f.noise_variances());
+        // a band view keeps the noise part
+        let band = f.band(1.5, 3.0).unwrap().to_frf();
+        assert_eq!(band.noise_variances(), Some(&[0.2, 1e-3][..]));
+        // without `_var`
+        let e = parse_frf_csv(
+            "freq_hz,G1_1_re,G1_1_im,G1_1_var_noise\n1,1,0,0.1\n",
+            "t.csv",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("need the `_var` columns"), "{e}");
+        // not on every entry
+        let e = parse_frf_csv(
+            "freq_hz,G1_1_re,G1_1_im,G2_1_re,G2_1_im,G1_1_var,G2_1_var,G1_1_var_noise\n1,1,0,1,0,1,1,0.1\n",
+            "t.csv",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("G2_1_var_noise") && e.contains("missing"), "{e}");
+        // negative
+        let e = parse_frf_csv(
+            "freq_hz,G1_1_re,G1_1_im,G1_1_var,G1_1_var_noise\n1,1,0,1,-0.1\n",
+            "t.csv",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("negative") && e.contains("G1_1_var_noise"),
+            "{e}"
+        );
+        // data without it write no such column
+        let plain = f.clone().with_noise_variance(None).unwrap();
+        assert!(!frf_csv_string(&plain, &[]).contains("var_noise"));
     }
 }

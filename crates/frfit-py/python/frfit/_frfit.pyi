@@ -167,6 +167,7 @@ def nonparametric(
     drop_periods: int = 0,
     lines: Optional[Sequence[int]] = None,
     line_threshold_db: float = 40.0,
+    realizations: Optional[int] = None,
 ) -> FrfData: ...
 def fit(
     data: FrfData,

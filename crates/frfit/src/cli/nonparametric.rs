@@ -45,6 +45,13 @@ pub struct Args {
     /// and ranges `A-B` or `A-B/S` (step S), comma separated (`1-999/2`: the odd bins).
     #[arg(long, value_parser = parse_lines, value_name = "K,A-B/S,..")]
     pub lines: Option<Vec<usize>>,
+    /// How many random-phase realizations the experiments (files, in the order given)
+    /// form, as consecutive blocks. Default: blocks of as many experiments as there are
+    /// inputs (6 files of a 3-input system: 2 realizations). With 2 or more the `_var`
+    /// columns hold the total variance (noise and nonlinear distortion) and `_var_noise`
+    /// its noise part.
+    #[arg(long, value_name = "R")]
+    pub realizations: Option<usize>,
     /// Output FRF CSV.
     #[arg(long)]
     pub out: PathBuf,
@@ -61,6 +68,7 @@ impl Args {
             drop_periods: self.drop_periods,
             lines: self.lines.clone(),
             line_threshold_db: self.line_threshold_db,
+            realizations: self.realizations,
         }
     }
 }
@@ -106,6 +114,7 @@ mod tests {
             drop_periods: 1,
             line_threshold_db: 40.0,
             lines: None,
+            realizations: None,
             out,
         }
     }
