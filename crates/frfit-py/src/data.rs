@@ -207,6 +207,15 @@ impl FrfData {
             .map(|v| real_3d(py, v, f.n_lines(), f.ny(), f.nu()))
             .transpose()
     }
+    /// The nonlinear distortion against the noise (a dict: `nonlinear_db`, `noise_db` dB
+    /// under the BLA, `total_to_noise`, `worst_hz`, `worst_db`), when the data carry the
+    /// total variance and its noise part; `None` otherwise.
+    #[getter]
+    fn distortion<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        frfit::data::distortion_level(&self.inner)
+            .map(|l| crate::model::to_python(py, &l))
+            .transpose()
+    }
     /// Outputs.
     #[getter]
     fn ny(&self) -> usize {

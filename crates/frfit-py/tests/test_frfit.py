@@ -370,6 +370,9 @@ def test_realizations_separate_the_nonlinear_distortion_from_the_noise(tmp_path)
     assert est.var_noise is not None and est.var is not None
     ratio = np.median(est.var / est.var_noise)
     assert ratio > 10, ratio  # the distortion is far above the noise
+    d = est.distortion
+    assert d["total_to_noise"] == pytest.approx(ratio, rel=0.05)
+    assert d["nonlinear_db"] > d["noise_db"] + 10
     # one realization: the variance is the noise variance only, and there is no noise part
     one = frfit.nonparametric(u, y, fs=fs, realizations=1)
     assert one.var_noise is None and np.median(one.var / est.var_noise) < 3

@@ -115,6 +115,7 @@ pub fn run(args: Args, _quiet: bool) -> Result<(), FrfitError> {
             "has_variance": d.has_variance(),
             "units": d.units(),
             "noise_rel": s.noise.map(|(m, p)| json!({"median": m, "p95": p})),
+            "nonlinear_distortion": frfit::data::distortion_level(&d),
             "metadata": d.metadata,
         });
         println!(
@@ -148,7 +149,11 @@ pub fn run(args: Args, _quiet: bool) -> Result<(), FrfitError> {
         ),
     }
     println!("units:        {}", d.units().unwrap_or("not given"));
-    if d.has_variance() {
+    if d.has_noise_variance() {
+        println!(
+            "variance:     present: total (_var, spread over realizations) and its noise part (_var_noise)"
+        );
+    } else if d.has_variance() {
         println!("variance:     present (_var columns)");
     } else {
         println!("variance:     absent");
@@ -165,6 +170,20 @@ pub fn run(args: Args, _quiet: bool) -> Result<(), FrfitError> {
             println!("noise:        variance present but every |G| is zero; no relative level")
         }
         None => println!("noise:        unknown: the data carry no variance"),
+    }
+    if let Some(l) = frfit::data::distortion_level(&d) {
+        println!(
+            "distortion:   nonlinear part {:+.1} dB relative to the BLA (median over lines), noise part {:+.1} dB; total/noise variance {:.3} (1 for a linear system); largest {:+.1} dB at {} Hz",
+            l.nonlinear_db,
+            l.noise_db,
+            l.total_to_noise,
+            l.worst_db,
+            fmt_num(l.worst_hz)
+        );
+    } else if d.has_variance() {
+        println!(
+            "distortion:   unknown: the variance has no noise part (_var_noise; one realization, or not stated)"
+        );
     }
     if d.metadata.is_empty() {
         println!("metadata:     none");
