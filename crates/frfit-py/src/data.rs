@@ -301,11 +301,11 @@ pub fn read(py: Python<'_>, path: PathBuf) -> PyResult<FrfData> {
 }
 
 /// Per experiment, per channel, the samples.
-type Records = Vec<Vec<Vec<f64>>>;
+pub(crate) type Records = Vec<Vec<Vec<f64>>>;
 
 /// Splits a time-record array `(n_samples, channels[, experiments[, periods]])` into
 /// per-experiment channel records; with a periods axis the periods are concatenated.
-fn records(
+pub(crate) fn records(
     py: Python<'_>,
     obj: &Bound<'_, PyAny>,
     name: &str,

@@ -61,6 +61,7 @@ fn _frfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<run::ErrorStats>()?;
     m.add_class::<run::Validation>()?;
     m.add_class::<run::Reduction>()?;
+    m.add_class::<run::Prediction>()?;
     m.add_function(wrap_pyfunction!(data::read, m)?)?;
     m.add_function(wrap_pyfunction!(data::nonparametric, m)?)?;
     m.add_function(wrap_pyfunction!(data::simulate_random_modal, m)?)?;
@@ -69,5 +70,6 @@ fn _frfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run::diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(run::validate, m)?)?;
     m.add_function(wrap_pyfunction!(run::reduce, m)?)?;
+    m.add_function(wrap_pyfunction!(run::predict, m)?)?;
     Ok(())
 }

@@ -690,3 +690,114 @@ pub fn reduce(py: Python<'_>, model: &Model, order: Option<usize>) -> PyResult<R
     }
     Ok(r)
 }
+
+/// The prediction of test records by a model (`frfit.predict`): per output the NRMSE
+/// over the excited lines against the records' own noise floor.
+#[pyclass(module = "frfit", name = "Prediction", frozen)]
+pub struct Prediction {
+    p: frfit::predict::Prediction,
+}
+
+#[pymethods]
+impl Prediction {
+    /// NRMSE per output.
+    #[getter]
+    fn nrmse<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        real_1d(py, self.p.outputs.iter().map(|o| o.nrmse).collect())
+    }
+    /// The records' noise floor per output (NaN with one period).
+    #[getter]
+    fn noise_floor<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        real_1d(
+            py,
+            self.p
+                .outputs
+                .iter()
+                .map(|o| o.noise_floor.unwrap_or(f64::NAN))
+                .collect(),
+        )
+    }
+    /// The excited lines, Hz.
+    #[getter]
+    fn freq_hz<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        real_1d(py, self.p.freq_hz.clone())
+    }
+    /// Records (experiments) compared.
+    #[getter]
+    fn records(&self) -> usize {
+        self.p.records
+    }
+    /// Writes `prediction.json` and `prediction.svg` into `dir`.
+    fn report(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
+        py.detach(|| self.p.write(&dir, "frfit predict"))
+            .map_err(to_py)
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "Prediction({} records, NRMSE {:?})",
+            self.p.records,
+            self.p.outputs.iter().map(|o| o.nrmse).collect::<Vec<_>>()
+        )
+    }
+}
+
+/// Predicts periodic test records with `model`, as `frfit predict` does: `u` and `y`
+/// time records shaped as for `frfit.nonparametric`; the periodic steady state
+/// `Y(k) = G(k) U(k)` on the excited lines against the measured outputs.
+#[pyfunction]
+#[pyo3(signature = (model, u, y, fs, period=None, drop_periods=0, lines=None))]
+pub fn predict(
+    py: Python<'_>,
+    model: &Model,
+    u: &Bound<'_, PyAny>,
+    y: &Bound<'_, PyAny>,
+    fs: f64,
+    period: Option<usize>,
+    drop_periods: usize,
+    lines: Option<Vec<usize>>,
+) -> PyResult<Prediction> {
+    let (ins, pu) = crate::data::records(py, u, "u")?;
+    let (outs, py_) = crate::data::records(py, y, "y")?;
+    if ins.len() != outs.len() {
+        return Err(arg_err(
+            "y",
+            format!("{} experiments", outs.len()),
+            format!(
+                "u holds {} experiments: u and y must hold the same",
+                ins.len()
+            ),
+        ));
+    }
+    let experiments: Vec<experiment::nonparametric::time_records::ExperimentRecords> = ins
+        .into_iter()
+        .zip(outs)
+        .map(
+            |(inputs, outputs)| experiment::nonparametric::time_records::ExperimentRecords {
+                inputs,
+                outputs,
+            },
+        )
+        .collect();
+    let spec = frfit::nonparametric::RecordSpec {
+        fs: Some(fs),
+        period: period.or(pu).or(py_),
+        drop_periods,
+        lines,
+        realizations: Some(1),
+        ..Default::default()
+    };
+    let m = &model.model;
+    let p = py
+        .detach(|| -> Result<_, FrfitError> {
+            let spectra = frfit::nonparametric::spectra_from_arrays(&experiments, &spec)?;
+            let omega: Vec<f64> = spectra
+                .freq_hz
+                .iter()
+                .map(|f| f * std::f64::consts::TAU)
+                .collect();
+            let g = frf_data::ModelStructure::response_at(m, &omega);
+            frfit::predict::predict(&g, &spectra)
+        })
+        .map_err(to_py)?;
+    Ok(Prediction { p })
+}

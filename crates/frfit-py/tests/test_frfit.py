@@ -286,7 +286,8 @@ def test_the_gil_is_released_during_a_fit():
     done = threading.Event()
 
     def work():
-        frfit.fit(data, delay="none", refine="ml")
+        for _ in range(3):
+            frfit.fit(data, delay="none", refine="ml")
         done.set()
 
     t = threading.Thread(target=work)
@@ -300,7 +301,7 @@ def test_the_gil_is_released_during_a_fit():
     # the main thread ran all along (about one tick per 2 ms of the fit when a core is
     # free; the fit's threads take both cores, so allow for slow wake-ups): a held GIL
     # would leave it one tick
-    assert elapsed > 0.1 and ticks > 0.05 * elapsed / 0.002, (ticks, elapsed)
+    assert ticks >= 10 and ticks > 0.05 * elapsed / 0.002, (ticks, elapsed)
 
 
 @pytest.mark.xfail(
@@ -384,3 +385,41 @@ def test_realizations_separate_the_nonlinear_distortion_from_the_noise(tmp_path)
     np.testing.assert_array_equal(back.var, est.var)
     with pytest.raises(frfit.FrfitError, match="full rank"):
         frfit.nonparametric(u, y, fs=fs, realizations=3)
+
+
+def _records(seed, experiments=3, periods=4, noise=1e-3, fs=2000.0, n=1000):
+    """Periodic multisine records of the plant: u (n, 3, E, P), y (n, 2, E, P)."""
+    bins = np.arange(10, 300, 3)
+    rng = np.random.default_rng(seed)
+    g = plant(bins * fs / n)
+    u = np.zeros((n, 3, experiments, periods))
+    y = np.zeros((n, 2, experiments, periods))
+    for e in range(experiments):
+        us = np.stack([_multisine(fs, n, bins, rng) for _ in range(3)], axis=1)
+        uf = np.fft.rfft(us, axis=0)
+        yf = np.zeros((n // 2 + 1, 2), dtype=complex)
+        yf[bins] = np.einsum("kij,kj->ki", g, uf[bins])
+        ys = np.fft.irfft(yf, n, axis=0)
+        for p in range(periods):
+            u[:, :, e, p] = us
+            y[:, :, e, p] = ys + noise * np.std(ys) * rng.normal(size=ys.shape)
+    return u, y
+
+
+def test_predict_scores_a_model_on_test_records_against_their_noise_floor(tmp_path):
+    u, y = _records(1)
+    est = frfit.nonparametric(u, y, fs=2000.0)
+    model = frfit.fit(est, delay="none")
+    ut, yt = _records(2)  # new random phases, new noise: records the model never saw
+    p = frfit.predict(model, ut, yt, fs=2000.0)
+    assert p.records == 3 and p.nrmse.shape == (2,)
+    # the model predicts at the records' noise floor (its own error is far below it)
+    assert np.all(p.nrmse < 1.5 * p.noise_floor), (p.nrmse, p.noise_floor)
+    assert np.all(p.noise_floor < 1e-2)
+    # a model that lacks a mode predicts far worse
+    small = frfit.reduce(model, order=model.order - 2).model
+    worse = frfit.predict(small, ut, yt, fs=2000.0)
+    assert np.all(worse.nrmse > 3 * p.nrmse), (worse.nrmse, p.nrmse)
+    p.report(tmp_path / "pred")
+    assert (tmp_path / "pred" / "prediction.json").exists()
+    assert (tmp_path / "pred" / "prediction.svg").exists()

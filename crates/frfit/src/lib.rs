@@ -15,6 +15,7 @@ pub mod nonparametric;
 pub mod options;
 pub mod pipeline;
 pub mod plots;
+pub mod predict;
 pub mod reduce;
 pub mod report;
 pub mod summary;

@@ -160,6 +160,22 @@ class Reduction:
     error_bound: Optional[float]
     measured_error: Optional[float]
 
+class Prediction:
+    nrmse: npt.NDArray[np.float64]
+    noise_floor: npt.NDArray[np.float64]
+    freq_hz: npt.NDArray[np.float64]
+    records: int
+    def report(self, dir: _Path) -> None: ...
+
+def predict(
+    model: Model,
+    u: npt.ArrayLike,
+    y: npt.ArrayLike,
+    fs: float,
+    period: Optional[int] = None,
+    drop_periods: int = 0,
+    lines: Optional[Sequence[int]] = None,
+) -> Prediction: ...
 def read(path: _Path) -> FrfData: ...
 def nonparametric(
     u: npt.ArrayLike,

@@ -15,6 +15,7 @@ pub mod info;
 pub mod model_opts;
 pub mod nonparametric;
 pub mod output;
+pub mod predict;
 pub mod reduce;
 pub mod simulate;
 pub mod validate;
@@ -57,6 +58,9 @@ pub enum Command {
     /// Minimum additive uncertainty per line against an independent validation FRF
     /// (Oomen-Bosgra); write DIR/validation.json and DIR/report.md.
     Validate(validate::Args),
+    /// Predict periodic test records with a model: the NRMSE per output against the
+    /// records' own noise floor; write DIR/prediction.json and DIR/prediction.svg.
+    Predict(predict::Args),
     /// Balanced truncation of a model (rigid body kept exactly): print the Hankel
     /// singular values; with --order N write the reduced model and its error bound.
     Reduce(reduce::Args),
@@ -77,5 +81,6 @@ pub fn run(cli: Cli) -> Result<(), FrfitError> {
         Command::Diagnose(a) => diagnose::run(a, quiet),
         Command::Validate(a) => validate::run(a, quiet),
         Command::Reduce(a) => reduce::run(a, quiet),
+        Command::Predict(a) => predict::run(a, quiet),
     }
 }
