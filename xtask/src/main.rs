@@ -9,10 +9,13 @@
 //! - `fuzz READER --runs N`: coverage-guided fuzzing of one reader (see `fuzz.rs`).
 //! - `bench-scale`: wall time, peak memory and accuracy of `frfit fit` on random modal
 //!   plants of growing size (see `bench_scale.rs`).
+//! - `calibrate`: the Monte Carlo harness of the reported uncertainty (z-scores of the
+//!   modes' frequency and damping over noise draws of one plant; see `calibrate.rs`).
 //! - `bench-diagnose`: wall time of `frfit diagnose` against one `frfit fit` on the
 //!   reference cases (see `bench_diagnose.rs`).
 
 mod bench_diagnose;
+mod calibrate;
 mod bench_scale;
 mod fuzz;
 mod oomen_bosgra;
@@ -53,6 +56,9 @@ enum Task {
     /// Wall time of `frfit diagnose` against one `frfit fit` on the reference cases of
     /// ../shared/data (median ratio over the cases).
     BenchDiagnose(bench_diagnose::Args),
+    /// Monte Carlo calibration of the reported standard deviations: z RMS and coverage
+    /// of the modes' frequency and damping over noise draws of a random plant.
+    Calibrate(calibrate::Args),
 }
 
 /// An error of a task: which stage failed and why.
@@ -101,6 +107,7 @@ fn main() -> ExitCode {
         Some(Task::Fuzz(args)) => fuzz::run(args),
         Some(Task::BenchScale(args)) => bench_scale::run(args),
         Some(Task::BenchDiagnose(args)) => bench_diagnose::run(args),
+        Some(Task::Calibrate(args)) => calibrate::run(args),
         None => {
             let mut cmd = Cli::command();
             match cmd.print_help() {

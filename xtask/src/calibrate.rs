@@ -1,0 +1,197 @@
+//! `cargo xtask calibrate`: the Monte Carlo harness of the uncertainty the fits report.
+//!
+//! One plant of the simulator (`experiment::synth::RandomModal`: a random modal MIMO
+//! plant, optionally with close pairs), many noise draws: each draw adds circular complex
+//! Gaussian noise of a known standard deviation to the exact response, states its
+//! variance in the data (so the fit weighs by it: maximum likelihood), fits with the
+//! chain asked for, and compares every true mode's frequency and damping with the fitted
+//! mode nearest to it through `z = (estimate - truth) / reported std`. Pooled over modes
+//! and draws: the RMS of `z` (1 when the reported standard deviations are right) and the
+//! fraction with `|z| < 1.96` (0.95 when they are). The delay (the plant has none) gives
+//! one `z` per draw when the fit reports its standard deviation.
+//!
+//! `cargo xtask calibrate --draws 100 --plant random --plant close-pair`
+
+use crate::{Context, Error};
+use clap::Args as ClapArgs;
+use experiment::synth::{RandomModal, RandomModalConfig};
+use frf_data::{Frf, C64};
+use frfit::pipeline::{self, PipelineConfig};
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use std::time::Instant;
+
+/// Arguments of `cargo xtask calibrate`.
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// Plants: `random` (well-separated modes) and/or `close-pair` (30 % of the modes in
+    /// close pairs). Default: both.
+    #[arg(long = "plant", value_name = "random|close-pair")]
+    pub plants: Vec<String>,
+    /// Noise draws per plant.
+    #[arg(long, default_value_t = 100)]
+    pub draws: usize,
+    /// The chain's refiner (`ml` reports standard deviations).
+    #[arg(long, default_value = "ml")]
+    pub refine: String,
+    /// Noise standard deviation relative to the median magnitude.
+    #[arg(long, default_value_t = 1e-3)]
+    pub noise: f64,
+    /// Outputs, inputs, modes and lines of the plant.
+    #[arg(long, default_value_t = 4)]
+    pub ny: usize,
+    /// Inputs.
+    #[arg(long, default_value_t = 4)]
+    pub nu: usize,
+    /// Modes.
+    #[arg(long, default_value_t = 10)]
+    pub modes: usize,
+    /// Lines.
+    #[arg(long, default_value_t = 2000)]
+    pub lines: usize,
+    /// Seed of the plant (the draws use their own seeds).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// Pooled z statistics.
+#[derive(Default)]
+struct Pool {
+    z: Vec<f64>,
+}
+
+impl Pool {
+    fn push(&mut self, z: f64) {
+        if z.is_finite() {
+            self.z.push(z);
+        }
+    }
+    fn row(&self, name: &str) -> String {
+        let n = self.z.len();
+        if n == 0 {
+            return format!("| {name} | 0 | - | - |");
+        }
+        let rms = (self.z.iter().map(|z| z * z).sum::<f64>() / n as f64).sqrt();
+        let inside = self.z.iter().filter(|z| z.abs() < 1.96).count() as f64 / n as f64;
+        format!("| {name} | {n} | {rms:.3} | {inside:.3} |")
+    }
+}
+
+/// Runs `cargo xtask calibrate`.
+pub fn run(a: Args) -> Result<(), Error> {
+    let plants = if a.plants.is_empty() {
+        vec!["random".to_string(), "close-pair".to_string()]
+    } else {
+        a.plants.clone()
+    };
+    for plant in &plants {
+        let close = match plant.as_str() {
+            "random" => 0.0,
+            "close-pair" => 0.3,
+            p => {
+                return Err(Error::new(
+                    "--plant",
+                    format!("unknown plant `{p}`: random or close-pair"),
+                ))
+            }
+        };
+        let cfg = RandomModalConfig {
+            ny: a.ny,
+            nu: a.nu,
+            modes: a.modes,
+            lines: a.lines,
+            close_pair_fraction: close,
+            noise: a.noise,
+            seed: a.seed,
+            ..RandomModalConfig::default()
+        };
+        let r = RandomModal::generate(&cfg).stage("simulate")?;
+        let truth: Vec<(f64, f64)> = r
+            .plant
+            .to_truth(a.seed, 0.0, 0.0)
+            .model
+            .modes
+            .iter()
+            .map(|m| (m.f_hz, m.zeta))
+            .collect();
+        let sigma = r.noise_std;
+        let (mut zf, mut zz, mut zd) = (Pool::default(), Pool::default(), Pool::default());
+        let (mut missed, mut spurious, mut no_std) = (0usize, 0usize, 0usize);
+        let t0 = Instant::now();
+        for d in 0..a.draws {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+                a.seed.wrapping_mul(1_000_003).wrapping_add(d as u64 + 1),
+            );
+            let s = sigma / std::f64::consts::SQRT_2;
+            let values: Vec<C64> = r
+                .noiseless
+                .values()
+                .iter()
+                .map(|g| {
+                    let (x, y): (f64, f64) =
+                        (StandardNormal.sample(&mut rng), StandardNormal.sample(&mut rng));
+                    g + C64::new(s * x, s * y)
+                })
+                .collect();
+            let n = values.len();
+            let data = Frf::new(
+                r.noiseless.freq_hz_slice().to_vec(),
+                a.ny,
+                a.nu,
+                values,
+                Some(vec![sigma * sigma; n]),
+            )
+            .stage("data")?;
+            let pc = PipelineConfig {
+                refine: a.refine.clone(),
+                final_analysis: false,
+                ..PipelineConfig::default()
+            };
+            let out = pipeline::run(&data, "calibrate", &pc, "fit").stage("fit")?;
+            let Some(u) = &out.summary.uncertainty else {
+                no_std += 1;
+                continue;
+            };
+            spurious += u.modes.len().saturating_sub(truth.len());
+            for &(f, z) in &truth {
+                let Some(m) = u
+                    .modes
+                    .iter()
+                    .min_by(|x, y| (x.f_hz - f).abs().total_cmp(&(y.f_hz - f).abs()))
+                    .filter(|m| (m.f_hz - f).abs() < 0.01 * f)
+                else {
+                    missed += 1;
+                    continue;
+                };
+                zf.push((m.f_hz - f) / m.f_hz_std);
+                zz.push((m.zeta - z) / m.zeta_std);
+            }
+            if let (Some(t), Some(st)) = (u.delay_s, u.delay_s_std) {
+                zd.push(t / st);
+            }
+            eprint!("\r{plant}: draw {}/{}", d + 1, a.draws);
+        }
+        eprintln!();
+        println!(
+            "\n{plant} plant (seed {}, {}x{}, {} modes, {} lines, noise {:.1e} of the median magnitude), `--refine {}`, {} draws in {:.1} s:\n",
+            a.seed,
+            a.ny,
+            a.nu,
+            truth.len(),
+            a.lines,
+            a.noise,
+            a.refine,
+            a.draws,
+            t0.elapsed().as_secs_f64()
+        );
+        println!("| | z values | z RMS (1 if calibrated) | inside +-1.96 sigma (0.95) |");
+        println!("|---|---|---|---|");
+        println!("{}", zf.row("frequency"));
+        println!("{}", zz.row("damping"));
+        println!("{}", zd.row("delay (truth 0)"));
+        println!(
+            "\ntrue modes without a fitted mode within 1 %: {missed}; fitted modes beyond the truth's count: {spurious}; draws without standard deviations: {no_std}"
+        );
+    }
+    Ok(())
+}
