@@ -15,8 +15,8 @@
 //!   reference cases (see `bench_diagnose.rs`).
 
 mod bench_diagnose;
-mod calibrate;
 mod bench_scale;
+mod calibrate;
 mod fuzz;
 mod oomen_bosgra;
 mod validate;
