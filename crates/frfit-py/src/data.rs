@@ -4,7 +4,6 @@ use crate::arrays::{
     complex_3d, complex_array, frf_shape, real_1d, real_3d, real_array, to_line_major,
 };
 use crate::{arg_err, data_err, to_py};
-use experiment::nonparametric::time_records::ExperimentRecords;
 use frf_data::{Frf, FrfDataset};
 use frfit::nonparametric::{estimate_described, spectra_from_arrays, Estimated, RecordSpec};
 use pyo3::prelude::*;
@@ -300,45 +299,15 @@ pub fn read(py: Python<'_>, path: PathBuf) -> PyResult<FrfData> {
     Ok(FrfData { inner: frf })
 }
 
-/// Per experiment, per channel, the samples.
-pub(crate) type Records = Vec<Vec<Vec<f64>>>;
-
-/// Splits a time-record array `(n_samples, channels[, experiments[, periods]])` into
-/// per-experiment channel records; with a periods axis the periods are concatenated.
+/// Reads a time-record array `(n_samples, channels[, experiments[, periods]])` into
+/// per-experiment channel records ([`frfit::nonparametric::records_from_array`]).
 pub(crate) fn records(
     py: Python<'_>,
     obj: &Bound<'_, PyAny>,
     name: &str,
-) -> PyResult<(Records, Option<usize>)> {
+) -> PyResult<(frfit::nonparametric::Records, Option<usize>)> {
     let d = real_array(py, obj, name)?;
-    let (ns, nc, ne, np) = match *d.shape.as_slice() {
-        [ns] => (ns, 1, 1, 1),
-        [ns, nc] => (ns, nc, 1, 1),
-        [ns, nc, ne] => (ns, nc, ne, 1),
-        [ns, nc, ne, np] => (ns, nc, ne, np),
-        _ => {
-            return Err(arg_err(
-                name,
-                format!("shape {:?}", d.shape),
-                "expected (n_samples, channels[, experiments[, periods]])",
-            ))
-        }
-    };
-    let idx = |t: usize, c: usize, e: usize, p: usize| ((t * nc + c) * ne + e) * np + p;
-    let exps = (0..ne)
-        .map(|e| {
-            (0..nc)
-                .map(|c| {
-                    (0..np)
-                        .flat_map(|p| (0..ns).map(move |t| (t, p)))
-                        .map(|(t, p)| d.values[idx(t, c, e, p)])
-                        .collect()
-                })
-                .collect()
-        })
-        .collect();
-    // with a periods axis, a period is the first axis
-    Ok((exps, (d.shape.len() == 4).then_some(ns)))
+    frfit::nonparametric::records_from_array(&d.shape, &d.values, name).map_err(to_py)
 }
 
 /// The nonparametric FRF of periodic experiments from time records (McKelvey; the
@@ -365,26 +334,12 @@ pub fn nonparametric(
     line_threshold_db: f64,
     realizations: Option<usize>,
 ) -> PyResult<FrfData> {
-    let (ins, pu) = records(py, u, "u")?;
-    let (outs, py_) = records(py, y, "y")?;
-    if ins.len() != outs.len() {
-        return Err(arg_err(
-            "y",
-            format!("{} experiments", outs.len()),
-            format!(
-                "u holds {} experiments: u and y must hold the same",
-                ins.len()
-            ),
-        ));
-    }
-    let experiments: Vec<ExperimentRecords> = ins
-        .into_iter()
-        .zip(outs)
-        .map(|(inputs, outputs)| ExperimentRecords { inputs, outputs })
-        .collect();
+    let (experiments, period_of_arrays) =
+        frfit::nonparametric::experiments_from_arrays(records(py, u, "u")?, records(py, y, "y")?)
+            .map_err(to_py)?;
     let spec = RecordSpec {
         fs: Some(fs),
-        period: period.or(pu).or(py_),
+        period: period.or(period_of_arrays),
         drop_periods,
         lines,
         line_threshold_db,

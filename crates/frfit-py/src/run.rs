@@ -756,31 +756,14 @@ pub fn predict(
     drop_periods: usize,
     lines: Option<Vec<usize>>,
 ) -> PyResult<Prediction> {
-    let (ins, pu) = crate::data::records(py, u, "u")?;
-    let (outs, py_) = crate::data::records(py, y, "y")?;
-    if ins.len() != outs.len() {
-        return Err(arg_err(
-            "y",
-            format!("{} experiments", outs.len()),
-            format!(
-                "u holds {} experiments: u and y must hold the same",
-                ins.len()
-            ),
-        ));
-    }
-    let experiments: Vec<experiment::nonparametric::time_records::ExperimentRecords> = ins
-        .into_iter()
-        .zip(outs)
-        .map(
-            |(inputs, outputs)| experiment::nonparametric::time_records::ExperimentRecords {
-                inputs,
-                outputs,
-            },
-        )
-        .collect();
+    let (experiments, period_of_arrays) = frfit::nonparametric::experiments_from_arrays(
+        crate::data::records(py, u, "u")?,
+        crate::data::records(py, y, "y")?,
+    )
+    .map_err(to_py)?;
     let spec = frfit::nonparametric::RecordSpec {
         fs: Some(fs),
-        period: period.or(pu).or(py_),
+        period: period.or(period_of_arrays),
         drop_periods,
         lines,
         realizations: Some(1),

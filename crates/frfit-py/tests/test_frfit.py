@@ -350,22 +350,8 @@ def test_realizations_separate_the_nonlinear_distortion_from_the_noise(tmp_path)
     # 2 realizations x 3 experiments of a 3-input system, 4 periods each; a static cubic
     # term on the outputs makes a stochastic nonlinear contribution that is periodic (the
     # period spread cannot see it) but changes with the random phases
-    fs, n, periods = 2000.0, 1000, 4
-    bins = np.arange(10, 300, 3)
-    rng = np.random.default_rng(8)
-    g = plant(bins * fs / n)
-    u = np.zeros((n, 3, 6, periods))
-    y = np.zeros((n, 2, 6, periods))
-    for e in range(6):
-        us = np.stack([_multisine(fs, n, bins, rng) for _ in range(3)], axis=1)
-        uf = np.fft.rfft(us, axis=0)
-        yf = np.zeros((n // 2 + 1, 2), dtype=complex)
-        yf[bins] = np.einsum("kij,kj->ki", g, uf[bins])
-        ys = np.fft.irfft(yf, n, axis=0)
-        ys = ys + 0.02 * ys**3 / np.std(ys) ** 2
-        for p in range(periods):
-            u[:, :, e, p] = us
-            y[:, :, e, p] = ys + 1e-5 * np.std(ys) * rng.normal(size=ys.shape)
+    fs = 2000.0
+    u, y = _records(8, experiments=6, noise=1e-5, cubic=0.02)
     est = frfit.nonparametric(u, y, fs=fs)
     assert est.metadata["realizations"] == "2"
     assert est.var_noise is not None and est.var is not None
@@ -387,8 +373,9 @@ def test_realizations_separate_the_nonlinear_distortion_from_the_noise(tmp_path)
         frfit.nonparametric(u, y, fs=fs, realizations=3)
 
 
-def _records(seed, experiments=3, periods=4, noise=1e-3, fs=2000.0, n=1000):
-    """Periodic multisine records of the plant: u (n, 3, E, P), y (n, 2, E, P)."""
+def _records(seed, experiments=3, periods=4, noise=1e-3, fs=2000.0, n=1000, cubic=0.0):
+    """Periodic multisine records of the plant: u (n, 3, E, P), y (n, 2, E, P); `cubic`
+    adds a static cubic term to the outputs (a stochastic nonlinear contribution)."""
     bins = np.arange(10, 300, 3)
     rng = np.random.default_rng(seed)
     g = plant(bins * fs / n)
@@ -400,6 +387,7 @@ def _records(seed, experiments=3, periods=4, noise=1e-3, fs=2000.0, n=1000):
         yf = np.zeros((n // 2 + 1, 2), dtype=complex)
         yf[bins] = np.einsum("kij,kj->ki", g, uf[bins])
         ys = np.fft.irfft(yf, n, axis=0)
+        ys = ys + cubic * ys**3 / np.std(ys) ** 2
         for p in range(periods):
             u[:, :, e, p] = us
             y[:, :, e, p] = ys + noise * np.std(ys) * rng.normal(size=ys.shape)
@@ -423,3 +411,43 @@ def test_predict_scores_a_model_on_test_records_against_their_noise_floor(tmp_pa
     p.report(tmp_path / "pred")
     assert (tmp_path / "pred" / "prediction.json").exists()
     assert (tmp_path / "pred" / "prediction.svg").exists()
+
+
+def _frfit_binary():
+    import pathlib
+
+    exe = pathlib.Path(__file__).resolve().parents[3] / "target" / "release" / "frfit"
+    if not exe.exists():
+        pytest.skip(f"skipped: the frfit binary is not built ({exe}); cargo build --release")
+    return exe
+
+
+@pytest.mark.parametrize("how", ["savez", "savez_compressed", "npy"])
+def test_the_cli_reads_numpy_time_records_as_numpy_writes_them(tmp_path, how):
+    import subprocess
+
+    exe = _frfit_binary()
+    u, y = _records(4, experiments=6)  # 2 realizations of 3 experiments
+    if how == "npy":
+        np.save(tmp_path / "u.npy", u)
+        np.save(tmp_path / "y.npy", np.asfortranarray(y))  # Fortran order too
+        files = [str(tmp_path / "u.npy"), str(tmp_path / "y.npy")]
+    else:
+        getattr(np, how)(tmp_path / "rec.npz", u=u, y=y)
+        files = [str(tmp_path / "rec.npz")]
+    out = tmp_path / "frf.csv"
+    subprocess.run(
+        [str(exe), "--quiet", "nonparametric", *files, "--fs", "2000", "--out", str(out)],
+        check=True,
+    )
+    cli = frfit.read(out)
+    arrays = frfit.nonparametric(u, y, fs=2000.0)
+    np.testing.assert_array_equal(cli.freq_hz, arrays.freq_hz)
+    np.testing.assert_allclose(cli.G, arrays.G, rtol=1e-12)
+    assert cli.var_noise is not None and cli.metadata["realizations"] == "2"
+    bad = subprocess.run(
+        [str(exe), "nonparametric", *files, "--fs", "2000", "--realizations", "4",
+         "--out", str(out)],
+        capture_output=True, text=True,
+    )
+    assert bad.returncode != 0 and "--realizations" in bad.stderr

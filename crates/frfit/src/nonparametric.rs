@@ -186,6 +186,133 @@ pub fn spectra_from_mat_files(
     Ok((group_realizations(spectra, spec.realizations)?, notes))
 }
 
+/// Per experiment, per channel, the samples.
+pub type Records = Vec<Vec<Vec<f64>>>;
+
+/// Splits a time-record array shaped `(n_samples, channels[, experiments[, periods]])`
+/// (C order) into per-experiment channel records; with a periods axis the periods are
+/// concatenated and the period length (`n_samples`) is returned beside them. `what`
+/// names the array in errors. The layout of the public benchmark data sets and of
+/// NumPy users; the Python package and the `.npy`/`.npz` reader share it.
+pub fn records_from_array(
+    shape: &[usize],
+    data: &[f64],
+    what: &str,
+) -> Result<(Records, Option<usize>), FrfitError> {
+    let (ns, nc, ne, np) = match *shape {
+        [ns] => (ns, 1, 1, 1),
+        [ns, nc] => (ns, nc, 1, 1),
+        [ns, nc, ne] => (ns, nc, ne, 1),
+        [ns, nc, ne, np] => (ns, nc, ne, np),
+        _ => {
+            return Err(FrfitError::argument(
+                what,
+                format!("shape {shape:?}"),
+                "expected (n_samples, channels[, experiments[, periods]])",
+            ))
+        }
+    };
+    if ns * nc * ne * np != data.len() {
+        return Err(FrfitError::argument(
+            what,
+            format!("shape {shape:?}"),
+            format!("the array holds {} values", data.len()),
+        ));
+    }
+    let idx = |t: usize, c: usize, e: usize, p: usize| ((t * nc + c) * ne + e) * np + p;
+    let exps = (0..ne)
+        .map(|e| {
+            (0..nc)
+                .map(|c| {
+                    (0..np)
+                        .flat_map(|p| (0..ns).map(move |t| (t, p)))
+                        .map(|(t, p)| data[idx(t, c, e, p)])
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    Ok((exps, (shape.len() == 4).then_some(ns)))
+}
+
+/// The experiments of input and output arrays of the same experiment count.
+pub fn experiments_from_arrays(
+    u: (Records, Option<usize>),
+    y: (Records, Option<usize>),
+) -> Result<(Vec<ExperimentRecords>, Option<usize>), FrfitError> {
+    if u.0.len() != y.0.len() {
+        return Err(FrfitError::argument(
+            "y",
+            format!("{} experiments", y.0.len()),
+            format!(
+                "u holds {} experiments: u and y must hold the same",
+                u.0.len()
+            ),
+        ));
+    }
+    let period = u.1.or(y.1);
+    let exps =
+        u.0.into_iter()
+            .zip(y.0)
+            .map(|(inputs, outputs)| ExperimentRecords { inputs, outputs })
+            .collect();
+    Ok((exps, period))
+}
+
+/// Periodic spectra from NumPy files: one `.npz` holding the arrays `u` and `y` (or the
+/// names `spec.inputs[0]`, `spec.outputs[0]`), or two `.npy` files, inputs first; each
+/// shaped `(n_samples, channels[, experiments[, periods]])`. `spec.fs` is required.
+pub fn spectra_from_numpy(
+    files: &[PathBuf],
+    spec: &RecordSpec,
+) -> Result<PeriodicSpectra, FrfitError> {
+    use frf_data::io::npy::{read_npy, read_npz, NpyArray};
+    let name = |v: &[String], d: &str| v.first().cloned().unwrap_or_else(|| d.to_string());
+    let (u, y): (NpyArray, NpyArray) = match files {
+        [f] if has_ext(f, "npz") => {
+            let mut m = read_npz(f)?;
+            let (un, yn) = (name(&spec.inputs, "u"), name(&spec.outputs, "y"));
+            let mut take = |n: &str, opt: &str| {
+                m.remove(n).ok_or_else(|| {
+                    FrfitError::argument(
+                        opt,
+                        n,
+                        format!(
+                            "{} holds no array `{n}` (it holds {})",
+                            f.display(),
+                            m.keys().cloned().collect::<Vec<_>>().join(", ")
+                        ),
+                    )
+                })
+            };
+            (take(&un, "--input")?, take(&yn, "--output")?)
+        }
+        [fu, fy] if has_ext(fu, "npy") && has_ext(fy, "npy") => (read_npy(fu)?, read_npy(fy)?),
+        _ => {
+            return Err(FrfitError::argument(
+                "files",
+                files.len(),
+                "NumPy time records: one .npz with arrays u and y, or two .npy files (inputs, then outputs)",
+            ))
+        }
+    };
+    let (exps, period) = experiments_from_arrays(
+        records_from_array(&u.shape, &u.data, "u")?,
+        records_from_array(&y.shape, &y.data, "y")?,
+    )?;
+    let spec = RecordSpec {
+        period: spec.period.or(period),
+        ..spec.clone()
+    };
+    spectra_from_arrays(&exps, &spec)
+}
+
+fn has_ext(p: &Path, ext: &str) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case(ext))
+}
+
 /// Periodic spectra from time records held in memory: `experiments[e]` holds the input
 /// and output channels of experiment `e`; `spec.fs` is required.
 pub fn spectra_from_arrays(
@@ -300,8 +427,9 @@ pub fn group_realizations(
     Ok(out)
 }
 
-/// The periodic spectra of `files`: `.mat` time records (one per experiment) or one
-/// periodic spectra CSV; notes on what was skipped.
+/// The periodic spectra of `files`: `.mat` time records (one per experiment), NumPy
+/// records (one `.npz`, or two `.npy`: [`spectra_from_numpy`]) or one periodic spectra
+/// CSV; notes on what was skipped.
 pub fn spectra_from_files(
     files: &[PathBuf],
     spec: &RecordSpec,
@@ -316,6 +444,9 @@ pub fn spectra_from_files(
     }
     if files.iter().any(|f| is_mat(f)) {
         return spectra_from_mat_files(files, spec);
+    }
+    if files.iter().any(|f| has_ext(f, "npz") || has_ext(f, "npy")) {
+        return Ok((spectra_from_numpy(files, spec)?, Vec::new()));
     }
     if files.len() != 1 {
         return Err(FrfitError::argument(
@@ -355,6 +486,11 @@ pub fn estimate_described(
     }
     comments.extend(spectra.comments.iter().cloned());
     comments.append(&mut notes);
+    // FORMATS.md: the comment words that say what the variances were estimated from
+    comments.push(format!(
+        "periods={} realizations={} experiments={}",
+        est.periods, est.realizations, est.n_experiments
+    ));
     comments.push(format!(
         "estimator: G = mean_p(Y_p) mean_p(U_p)^-1 per realization, mean over {} realization(s); {} periods, {} experiment(s); variance: {}",
         est.realizations,

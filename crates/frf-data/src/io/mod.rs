@@ -21,6 +21,7 @@ mod csv;
 pub mod dialect;
 pub mod mat5;
 mod mat_frf;
+pub mod npy;
 mod uff;
 mod uff_binary;
 mod uff_write;

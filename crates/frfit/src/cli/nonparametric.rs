@@ -14,24 +14,23 @@ use frfit::nonparametric::{
 use frfit::FrfitError;
 use std::path::PathBuf;
 
-/// Arguments of `frfit nonparametric`.
-#[derive(ClapArgs, Debug)]
-pub struct Args {
-    /// Input files: `.mat` time records (one per experiment) or one periodic spectra
-    /// `.csv`.
-    #[arg(required = true)]
-    pub files: Vec<PathBuf>,
+/// How to read and cut time records: the options `frfit nonparametric` and `frfit
+/// predict` share.
+#[derive(ClapArgs, Debug, Clone)]
+pub struct RecordArgs {
     /// Input signal names in the .mat files, comma separated (`-NAME` flips the sign,
-    /// `NAME:COL` takes a matrix column).
+    /// `NAME:COL` takes a matrix column); for a `.npz`, the input array's name (default
+    /// `u`).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub input: Vec<String>,
-    /// Output signal names, comma separated (same syntax as `--input`).
+    /// Output signal names, comma separated (same syntax as `--input`); for a `.npz`,
+    /// the output array's name (default `y`).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub output: Vec<String>,
     /// Sample rate, Hz (default: the scalar `fs` of the .mat file, when it has one).
     #[arg(long)]
     pub fs: Option<f64>,
-    /// Samples per period.
+    /// Samples per period (NumPy records with a periods axis: the first axis's length).
     #[arg(long)]
     pub period: Option<usize>,
     /// Leading periods dropped as transient.
@@ -45,6 +44,34 @@ pub struct Args {
     /// and ranges `A-B` or `A-B/S` (step S), comma separated (`1-999/2`: the odd bins).
     #[arg(long, value_parser = parse_lines, value_name = "K,A-B/S,..")]
     pub lines: Option<Vec<usize>>,
+}
+
+impl RecordArgs {
+    /// The record options as the library takes them, with `realizations`.
+    pub fn spec(&self, realizations: Option<usize>) -> RecordSpec {
+        RecordSpec {
+            inputs: self.input.clone(),
+            outputs: self.output.clone(),
+            fs: self.fs,
+            period: self.period,
+            drop_periods: self.drop_periods,
+            lines: self.lines.clone(),
+            line_threshold_db: self.line_threshold_db,
+            realizations,
+        }
+    }
+}
+
+/// Arguments of `frfit nonparametric`.
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// Input files: `.mat` time records (one per experiment), NumPy records (one `.npz`
+    /// with `u` and `y`, or `u.npy y.npy`) or one periodic spectra `.csv`.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// How to read and cut the records.
+    #[command(flatten)]
+    pub rec: RecordArgs,
     /// How many random-phase realizations the experiments (files, in the order given)
     /// form, as consecutive blocks. Default: blocks of as many experiments as there are
     /// inputs (6 files of a 3-input system: 2 realizations). With 2 or more the `_var`
@@ -57,25 +84,9 @@ pub struct Args {
     pub out: PathBuf,
 }
 
-impl Args {
-    /// The record options as the library takes them.
-    fn spec(&self) -> RecordSpec {
-        RecordSpec {
-            inputs: self.input.clone(),
-            outputs: self.output.clone(),
-            fs: self.fs,
-            period: self.period,
-            drop_periods: self.drop_periods,
-            lines: self.lines.clone(),
-            line_threshold_db: self.line_threshold_db,
-            realizations: self.realizations,
-        }
-    }
-}
-
 /// Runs `frfit nonparametric`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
-    let spec = args.spec();
+    let spec = args.rec.spec(args.realizations);
     let (spectra, notes) = spectra_from_files(&args.files, &spec)?;
     let sources: Vec<String> = args.files.iter().map(|f| f.display().to_string()).collect();
     let Estimated {
@@ -107,13 +118,15 @@ mod tests {
     fn base(files: Vec<PathBuf>, out: PathBuf) -> Args {
         Args {
             files,
-            input: vec!["iq_adx".into()],
-            output: vec!["theta_mx".into(), "-theta_my".into()],
-            fs: None,
-            period: Some(2500),
-            drop_periods: 1,
-            line_threshold_db: 40.0,
-            lines: None,
+            rec: RecordArgs {
+                input: vec!["iq_adx".into()],
+                output: vec!["theta_mx".into(), "-theta_my".into()],
+                fs: None,
+                period: Some(2500),
+                drop_periods: 1,
+                line_threshold_db: 40.0,
+                lines: None,
+            },
             realizations: None,
             out,
         }
@@ -145,8 +158,8 @@ mod tests {
         run(base(vec![mat.clone()], out.clone()), true).unwrap();
         let out2 = dir.join("per.csv");
         let mut a = base(vec![per], out2.clone());
-        a.input.clear();
-        a.output.clear();
+        a.rec.input.clear();
+        a.rec.output.clear();
         run(a, true).unwrap();
         for o in [out, out2] {
             let est = frf_data::io::read_frf_csv(&o).unwrap();
@@ -165,13 +178,13 @@ mod tests {
         }
         // errors: a struct variable, no period, unknown signal
         let mut a = base(vec![mat.clone()], dir.join("x.csv"));
-        a.output = vec!["ms".into()];
+        a.rec.output = vec!["ms".into()];
         assert!(run(a, true).unwrap_err().to_string().contains("struct"));
         let mut a = base(vec![mat.clone()], dir.join("x.csv"));
-        a.period = None;
+        a.rec.period = None;
         assert!(run(a, true).is_err());
         let mut a = base(vec![mat], dir.join("x.csv"));
-        a.input = vec!["nothere".into()];
+        a.rec.input = vec!["nothere".into()];
         assert!(run(a, true).unwrap_err().to_string().contains("nothere"));
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -3,9 +3,10 @@
 //! NRMSE per output against the records' own noise floor (see [`frfit::predict`]),
 //! written as `DIR/prediction.json` and `DIR/prediction.svg`.
 
+use super::nonparametric::RecordArgs;
 use clap::Args as ClapArgs;
 use frfit::additive_riv::ModelFile;
-use frfit::nonparametric::{parse_lines, spectra_from_files, RecordSpec};
+use frfit::nonparametric::spectra_from_files;
 use frfit::predict::predict;
 use frfit::validation_report::model_response;
 use frfit::FrfitError;
@@ -16,29 +17,13 @@ use std::path::PathBuf;
 pub struct Args {
     /// The model (JSON written by `frfit fit` or `frfit diagnose`).
     pub model: PathBuf,
-    /// Test records: `.mat` time records (one file per experiment) or one periodic
-    /// spectra `.csv`.
+    /// Test records: `.mat` time records (one file per experiment), NumPy records (one
+    /// `.npz`, or `u.npy y.npy`) or one periodic spectra `.csv`.
     #[arg(long, required = true, num_args = 1..)]
     pub records: Vec<PathBuf>,
-    /// Input signal names in the .mat files, comma separated (`-NAME` flips the sign,
-    /// `NAME:COL` takes a matrix column).
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-    pub input: Vec<String>,
-    /// Output signal names (same syntax).
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-    pub output: Vec<String>,
-    /// Sample rate, Hz (default: the scalar `fs` of the .mat file).
-    #[arg(long)]
-    pub fs: Option<f64>,
-    /// Samples per period.
-    #[arg(long)]
-    pub period: Option<usize>,
-    /// Leading periods dropped as transient.
-    #[arg(long, default_value_t = 0)]
-    pub drop_periods: usize,
-    /// The excited DFT bins (`K`, `A-B`, `A-B/S`), when the detection should not guess.
-    #[arg(long, value_parser = parse_lines, value_name = "K,A-B/S,..")]
-    pub lines: Option<Vec<usize>>,
+    /// How to read and cut the records.
+    #[command(flatten)]
+    pub rec: RecordArgs,
     /// Output directory (prediction.json, prediction.svg).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -46,17 +31,8 @@ pub struct Args {
 
 /// Runs `frfit predict`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
-    let spec = RecordSpec {
-        inputs: args.input.clone(),
-        outputs: args.output.clone(),
-        fs: args.fs,
-        period: args.period,
-        drop_periods: args.drop_periods,
-        lines: args.lines.clone(),
-        // every record is compared on its own: the grouping does not matter here
-        realizations: Some(1),
-        ..Default::default()
-    };
+    // every record is compared on its own: the grouping does not matter here
+    let spec = args.rec.spec(Some(1));
     let (spectra, _) = spectra_from_files(&args.records, &spec)?;
     let source = args.model.display().to_string();
     let file = ModelFile::read(&args.model).map_err(|e| FrfitError::Io {
