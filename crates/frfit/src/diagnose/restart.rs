@@ -74,7 +74,13 @@ pub fn delay_restart(
         with_delay: m,
         with_delay_cost: c,
         held,
-        estimate_s: first.report.delay_estimate.as_ref().map(|d| d.tau_s),
+        // the chain's own estimate, or the band's that the chain was handed
+        estimate_s: first
+            .report
+            .delay_estimate
+            .as_ref()
+            .or(ctx.delay_estimate.as_ref())
+            .map(|d| d.tau_s),
         held_delay_s,
     })
 }
@@ -222,8 +228,10 @@ fn delay_restarted(
     }
     let before = crate::pipeline::error_stats(&ctx.band, &response, &ctx.noise);
     let from = format!(
-        "the estimator chain from the start with the data's delay estimate ({:.2} us), the delay then held at {:.2} us",
-        restart.estimate_s.map_or(f64::NAN, |t| t * 1e6),
+        "the estimator chain from the start with the data's delay estimate ({}), the delay then held at {:.2} us",
+        restart
+            .estimate_s
+            .map_or("none could be made".to_string(), |t| format!("{:.2} us", t * 1e6)),
         first.model.factor.delay_s * 1e6
     );
     let summary = RestartSummary {
