@@ -58,13 +58,7 @@ impl Frf {
             });
         }
         if let Some(v) = &variance {
-            if v.len() != n * m {
-                return Err(FrfError::Dimension {
-                    what: "FRF variance".into(),
-                    expected: (n * m).to_string(),
-                    got: v.len().to_string(),
-                });
-            }
+            check_variance_len(v, n * m, "FRF variance")?;
         }
         for (k, &f) in freq_hz.iter().enumerate() {
             if !f.is_finite() || f < 0.0 {
@@ -95,19 +89,7 @@ impl Frf {
             }
         }
         if let Some(v) = &variance {
-            for (idx, &x) in v.iter().enumerate() {
-                if !x.is_finite() || x < 0.0 {
-                    let (k, e) = (idx / m, idx % m);
-                    return Err(FrfError::InvalidData {
-                        why: format!(
-                            "variance {x} at line {k} ({} Hz), entry G{}_{} (must be finite and >= 0)",
-                            freq_hz[k],
-                            e % ny + 1,
-                            e / ny + 1
-                        ),
-                    });
-                }
-            }
+            check_variance_values(v, &freq_hz, ny, nu, "variance")?;
         }
         Ok(Self {
             freq_hz,
@@ -179,8 +161,6 @@ impl Frf {
     /// it needs the (total) variance beside it, the same layout, finite values `>= 0`.
     pub fn with_noise_variance(mut self, noise: Option<Vec<f64>>) -> Result<Self, FrfError> {
         if let Some(v) = &noise {
-            let m = self.ny * self.nu;
-            let n = self.freq_hz.len();
             if self.variance.is_none() {
                 return Err(FrfError::invalid(
                     "noise variance",
@@ -188,25 +168,12 @@ impl Frf {
                     "a noise variance (`_var_noise`) needs the total variance (`_var`) beside it",
                 ));
             }
-            if v.len() != n * m {
-                return Err(FrfError::Dimension {
-                    what: "FRF noise variance".into(),
-                    expected: (n * m).to_string(),
-                    got: v.len().to_string(),
-                });
-            }
-            if let Some(idx) = v.iter().position(|x| !x.is_finite() || *x < 0.0) {
-                let (k, e) = (idx / m, idx % m);
-                return Err(FrfError::InvalidData {
-                    why: format!(
-                        "noise variance {} at line {k} ({} Hz), entry G{}_{} (must be finite and >= 0)",
-                        v[idx],
-                        self.freq_hz[k],
-                        e % self.ny + 1,
-                        e / self.ny + 1
-                    ),
-                });
-            }
+            check_variance_len(
+                v,
+                self.freq_hz.len() * self.ny * self.nu,
+                "FRF noise variance",
+            )?;
+            check_variance_values(v, &self.freq_hz, self.ny, self.nu, "noise variance")?;
         }
         self.noise_variance = noise;
         Ok(self)
@@ -267,6 +234,45 @@ impl Frf {
                 }
             }
         }
+    }
+}
+
+/// `v` holds `expected` values (the layout of [`Frf::values`]).
+fn check_variance_len(v: &[f64], expected: usize, what: &str) -> Result<(), FrfError> {
+    if v.len() != expected {
+        return Err(FrfError::Dimension {
+            what: what.into(),
+            expected: expected.to_string(),
+            got: v.len().to_string(),
+        });
+    }
+    Ok(())
+}
+
+/// Every value of `v` (a variance `what` in the layout of [`Frf::values`]) is finite
+/// and `>= 0`; the first that is not is an error naming its line and entry.
+fn check_variance_values(
+    v: &[f64],
+    freq_hz: &[f64],
+    ny: usize,
+    nu: usize,
+    what: &str,
+) -> Result<(), FrfError> {
+    let m = ny * nu;
+    match v.iter().position(|x| !x.is_finite() || *x < 0.0) {
+        Some(idx) => {
+            let (k, e) = (idx / m, idx % m);
+            Err(FrfError::InvalidData {
+                why: format!(
+                    "{what} {} at line {k} ({} Hz), entry G{}_{} (must be finite and >= 0)",
+                    v[idx],
+                    freq_hz[k],
+                    e % ny + 1,
+                    e / ny + 1
+                ),
+            })
+        }
+        None => Ok(()),
     }
 }
 

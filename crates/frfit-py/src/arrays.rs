@@ -8,7 +8,7 @@
 
 use crate::arg_err;
 use frf_data::C64;
-use numpy::{Complex64, PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{Element, PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -40,30 +40,31 @@ pub struct Dense<T> {
     pub values: Vec<T>,
 }
 
-/// Reads `obj` as a C-contiguous complex array.
-pub fn complex_array(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Dense<C64>> {
-    let a = contiguous(py, obj, "complex128", name)?;
-    let r: PyReadonlyArrayDyn<'_, Complex64> = a.extract()?;
-    let shape = r.shape().to_vec();
-    let values = r
-        .as_slice()
-        .map_err(|e| arg_err(name, "<array>", e.to_string()))?
-        .iter()
-        .map(|z| C64::new(z.re, z.im))
-        .collect();
-    Ok(Dense { shape, values })
-}
-
-/// Reads `obj` as a C-contiguous real array.
-pub fn real_array(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Dense<f64>> {
-    let a = contiguous(py, obj, "float64", name)?;
-    let r: PyReadonlyArrayDyn<'_, f64> = a.extract()?;
+/// Reads `obj` as a C-contiguous array of `T` (`dtype`: its NumPy name).
+fn dense<T: Element + Copy>(
+    py: Python<'_>,
+    obj: &Bound<'_, PyAny>,
+    dtype: &str,
+    name: &str,
+) -> PyResult<Dense<T>> {
+    let a = contiguous(py, obj, dtype, name)?;
+    let r: PyReadonlyArrayDyn<'_, T> = a.extract()?;
     let shape = r.shape().to_vec();
     let values = r
         .as_slice()
         .map_err(|e| arg_err(name, "<array>", e.to_string()))?
         .to_vec();
     Ok(Dense { shape, values })
+}
+
+/// Reads `obj` as a C-contiguous complex array (`C64` is NumPy's `complex128`).
+pub fn complex_array(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Dense<C64>> {
+    dense(py, obj, "complex128", name)
+}
+
+/// Reads `obj` as a C-contiguous real array.
+pub fn real_array(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Dense<f64>> {
+    dense(py, obj, "float64", name)
 }
 
 /// The `(n, ny, nu)` shape of an FRF array: 3-D as it is, 1-D as `(n, 1, 1)` (a SISO
@@ -110,25 +111,10 @@ pub fn to_c_order<T: Copy>(v: &[T], n: usize, ny: usize, nu: usize) -> Vec<T> {
     out
 }
 
-/// A complex `(n, ny, nu)` array from values in the library's layout.
-pub fn complex_3d<'py>(
+/// An `(n, ny, nu)` array (complex or real) from values in the library's layout.
+pub fn array_3d<'py, T: Element + Copy>(
     py: Python<'py>,
-    v: &[C64],
-    n: usize,
-    ny: usize,
-    nu: usize,
-) -> PyResult<Bound<'py, PyAny>> {
-    let c: Vec<Complex64> = to_c_order(v, n, ny, nu)
-        .into_iter()
-        .map(|z| Complex64::new(z.re, z.im))
-        .collect();
-    Ok(PyArray1::from_vec(py, c).reshape([n, ny, nu])?.into_any())
-}
-
-/// A real `(n, ny, nu)` array from values in the library's layout.
-pub fn real_3d<'py>(
-    py: Python<'py>,
-    v: &[f64],
+    v: &[T],
     n: usize,
     ny: usize,
     nu: usize,

@@ -1,9 +1,8 @@
 //! `frfit.FrfData`, `frfit.read` and `frfit.nonparametric`: measured data in.
 
-use crate::arrays::{
-    complex_3d, complex_array, frf_shape, real_1d, real_3d, real_array, to_line_major,
-};
+use crate::arrays::{array_3d, complex_array, frf_shape, real_1d, real_array, to_line_major};
 use crate::{arg_err, data_err, to_py};
+use experiment::nonparametric::time_records::ExperimentRecords;
 use frf_data::{Frf, FrfDataset};
 use frfit::nonparametric::{estimate_described, spectra_from_arrays, Estimated, RecordSpec};
 use pyo3::prelude::*;
@@ -188,14 +187,14 @@ impl FrfData {
     #[getter(G)]
     fn g<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let f = &self.inner;
-        complex_3d(py, f.values(), f.n_lines(), f.ny(), f.nu())
+        array_3d(py, f.values(), f.n_lines(), f.ny(), f.nu())
     }
     /// The variance of each entry, `(n, ny, nu)`, or `None`.
     #[getter]
     fn var<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         let f = &self.inner;
         f.variances()
-            .map(|v| real_3d(py, v, f.n_lines(), f.ny(), f.nu()))
+            .map(|v| array_3d(py, v, f.n_lines(), f.ny(), f.nu()))
             .transpose()
     }
     /// The noise part of the variance, `(n, ny, nu)`, or `None` (see the class).
@@ -203,7 +202,7 @@ impl FrfData {
     fn var_noise<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         let f = &self.inner;
         f.noise_variances()
-            .map(|v| real_3d(py, v, f.n_lines(), f.ny(), f.nu()))
+            .map(|v| array_3d(py, v, f.n_lines(), f.ny(), f.nu()))
             .transpose()
     }
     /// The nonlinear distortion against the noise (a dict: `nonlinear_db`, `noise_db` dB
@@ -299,15 +298,19 @@ pub fn read(py: Python<'_>, path: PathBuf) -> PyResult<FrfData> {
     Ok(FrfData { inner: frf })
 }
 
-/// Reads a time-record array `(n_samples, channels[, experiments[, periods]])` into
-/// per-experiment channel records ([`frfit::nonparametric::records_from_array`]).
-pub(crate) fn records(
+/// The experiments of the input and output record arrays `u` and `y`, each shaped
+/// `(n_samples, channels[, experiments[, periods]])`
+/// ([`frfit::nonparametric::records_from_array`]), and the period the arrays imply.
+pub(crate) fn experiments(
     py: Python<'_>,
-    obj: &Bound<'_, PyAny>,
-    name: &str,
-) -> PyResult<(frfit::nonparametric::Records, Option<usize>)> {
-    let d = real_array(py, obj, name)?;
-    frfit::nonparametric::records_from_array(&d.shape, &d.values, name).map_err(to_py)
+    u: &Bound<'_, PyAny>,
+    y: &Bound<'_, PyAny>,
+) -> PyResult<(Vec<ExperimentRecords>, Option<usize>)> {
+    let records = |obj: &Bound<'_, PyAny>, name: &str| -> PyResult<_> {
+        let d = real_array(py, obj, name)?;
+        frfit::nonparametric::records_from_array(&d.shape, &d.values, name).map_err(to_py)
+    };
+    frfit::nonparametric::experiments_from_arrays(records(u, "u")?, records(y, "y")?).map_err(to_py)
 }
 
 /// The nonparametric FRF of periodic experiments from time records (McKelvey; the
@@ -334,9 +337,7 @@ pub fn nonparametric(
     line_threshold_db: f64,
     realizations: Option<usize>,
 ) -> PyResult<FrfData> {
-    let (experiments, period_of_arrays) =
-        frfit::nonparametric::experiments_from_arrays(records(py, u, "u")?, records(py, y, "y")?)
-            .map_err(to_py)?;
+    let (experiments, period_of_arrays) = experiments(py, u, y)?;
     let spec = RecordSpec {
         fs: Some(fs),
         period: period.or(period_of_arrays),

@@ -1,7 +1,7 @@
 //! `frfit.Model`, `frfit.Mode`, `frfit.StateSpace` and `frfit.load_model`: a fitted
 //! model out (its modes with their uncertainty, its response, its state space, the file).
 
-use crate::arrays::{complex_3d, real_2d, real_array};
+use crate::arrays::{array_3d, real_2d, real_array};
 use crate::{arg_err, to_py};
 use additive_riv::{AdditiveModel, ModelFile};
 use frf_data::ModelStructure;
@@ -233,7 +233,7 @@ impl Model {
         let omega: Vec<f64> = f.values.iter().map(|f| f * std::f64::consts::TAU).collect();
         let model = &self.model;
         let grid = py.detach(|| model.response_at(&omega));
-        complex_3d(py, &grid.values, f.values.len(), grid.ny, grid.nu)
+        array_3d(py, &grid.values, f.values.len(), grid.ny, grid.nu)
     }
 
     /// The model as a real state space (modal block form, rigid-body integrators

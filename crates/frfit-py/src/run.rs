@@ -379,22 +379,13 @@ impl Diagnosis {
     fn report(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
         let out = &self.out;
         let source = &self.source;
-        py.detach(|| -> Result<(), FrfitError> {
-            std::fs::create_dir_all(&dir).map_err(|e| FrfitError::io(&dir, e))?;
-            let file = out
-                .model_file(Path::new(source), "frfit (python) diagnose")
-                .map_err(|e| FrfitError::Fit {
-                    what: "model file".into(),
-                    why: e.to_string(),
-                })?;
-            let model_path = dir.join("model.json");
-            file.write(&model_path).map_err(|e| FrfitError::Io {
-                path: model_path.display().to_string(),
-                message: e.to_string(),
-            })?;
-            let title = format!("frfit diagnose of {source}");
-            let input = out.report_input(&title)?;
-            frfit::report::write_report(&dir, &input, &out.summary).map(|_| ())
+        py.detach(|| {
+            out.write_outputs(
+                &dir.join("model.json"),
+                Some(&dir),
+                Path::new(source),
+                "frfit (python) diagnose",
+            )
         })
         .map_err(to_py)
     }
@@ -756,11 +747,7 @@ pub fn predict(
     drop_periods: usize,
     lines: Option<Vec<usize>>,
 ) -> PyResult<Prediction> {
-    let (experiments, period_of_arrays) = frfit::nonparametric::experiments_from_arrays(
-        crate::data::records(py, u, "u")?,
-        crate::data::records(py, y, "y")?,
-    )
-    .map_err(to_py)?;
+    let (experiments, period_of_arrays) = crate::data::experiments(py, u, y)?;
     let spec = frfit::nonparametric::RecordSpec {
         fs: Some(fs),
         period: period.or(period_of_arrays),

@@ -71,11 +71,7 @@ pub fn distortion_level(data: &Frf) -> Option<DistortionLevel> {
         }
     }
     let median = |v: &mut Vec<f64>| -> Option<f64> {
-        if v.is_empty() {
-            return None;
-        }
-        let mid = v.len() / 2;
-        Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
+        (!v.is_empty()).then(|| validation::stats::median_mut(v))
     };
     let db = |x: f64| 10.0 * x.max(1e-300).log10();
     Some(DistortionLevel {

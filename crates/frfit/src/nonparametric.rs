@@ -111,9 +111,7 @@ pub fn signed(spec: &str) -> (f64, &str) {
 
 /// Whether `p` has the `.mat` extension.
 pub fn is_mat(p: &Path) -> bool {
-    p.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("mat"))
+    has_ext(p, "mat")
 }
 
 /// Periodic spectra from `.mat` time records, one file per experiment, and notes on what

@@ -89,12 +89,14 @@ pub fn predict(g: &ResponseGrid, spectra: &PeriodicSpectra) -> Result<Prediction
         vec![0.0; ny * nl],
     );
     let mut records = 0;
+    // the period-averaged input and output of one record at one line
+    let (mut u, mut y) = (vec![zero; nu], vec![zero; ny]);
     for rs in &spectra.realizations {
         for e in 0..rs.n_experiments() {
             records += 1;
             for k in 0..nl {
-                let mut u = vec![zero; nu];
-                let mut y = vec![zero; ny];
+                u.fill(zero);
+                y.fill(zero);
                 for p in 0..np {
                     for (a, b) in u.iter_mut().zip(rs.input_at(e, p, k)) {
                         *a += *b / np as f64;

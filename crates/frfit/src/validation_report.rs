@@ -160,6 +160,18 @@ pub fn model_response(
     Ok((model.response_at(omega), desc))
 }
 
+/// `alpha`, the probability level of a validation, is strictly between 0 and 1.
+pub fn check_alpha(alpha: f64) -> Result<(), FrfitError> {
+    if !(alpha > 0.0 && alpha < 1.0) {
+        return Err(FrfitError::argument(
+            "--alpha",
+            alpha,
+            "a probability strictly between 0 and 1 (for example 0.99)",
+        ));
+    }
+    Ok(())
+}
+
 /// Validates a model on an independent measurement `data` (with `_var` columns): the
 /// smallest additive uncertainty per line for which the model is not invalidated with
 /// probability `alpha` (Oomen and Bosgra; [`crate::validation::validate_frf`]). The
@@ -175,13 +187,7 @@ pub fn validate_model(
     method: crate::validation::GammaMethod,
 ) -> Result<(FrfValidation, String), FrfitError> {
     use frf_data::FrfDataset;
-    if !(alpha > 0.0 && alpha < 1.0) {
-        return Err(FrfitError::argument(
-            "--alpha",
-            alpha,
-            "a probability strictly between 0 and 1 (for example 0.99)",
-        ));
-    }
+    check_alpha(alpha)?;
     let (grid, desc) = model_response(file, source, &data.omegas())?;
     if (grid.ny, grid.nu) != (data.ny(), data.nu()) {
         return Err(FrfitError::argument(

@@ -4,7 +4,7 @@
 
 use super::common::load_data;
 use super::model_opts::{progress, FitOptions};
-use super::output::{print_fit, write_outputs};
+use super::output::print_fit;
 use super::validate;
 use clap::Args as ClapArgs;
 use frf_data::FrfDataset;
@@ -79,8 +79,7 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     let out = out?;
     let model_path = args.report.join("model.json");
     std::fs::create_dir_all(&args.report).map_err(|e| FrfitError::io(&args.report, e))?;
-    write_outputs(
-        &out,
+    out.write_outputs(
         &model_path,
         Some(&args.report),
         &args.data,

@@ -3,8 +3,8 @@
 //! with CMIF initialisation, delay and hold handling, and the adaptation of the modes.
 
 use super::common::load_data;
-use super::model_opts::{check_options, progress, FitOptions};
-use super::output::{print_fit, write_outputs};
+use super::model_opts::{progress, FitOptions};
+use super::output::print_fit;
 use clap::Args as ClapArgs;
 use frfit::pipeline;
 use frfit::FrfitError;
@@ -29,8 +29,9 @@ pub struct Args {
 /// Runs `frfit fit`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     let data = load_data(&args.data)?;
-    check_options(&args.opts, &data)?;
-    let mut cfg = args.opts.pipeline_config();
+    let spec = args.opts.spec();
+    spec.check(&data)?;
+    let mut cfg = spec.pipeline_config();
     // the verdict and the floor comparison are the report's; `fit` prints neither
     cfg.final_analysis = args.report.is_some();
     let (sink, bar) = progress(quiet);
@@ -40,13 +41,7 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         b.finish_and_clear();
     }
     let out = out?;
-    write_outputs(
-        &out,
-        &args.out,
-        args.report.as_deref(),
-        &args.data,
-        "frfit fit",
-    )?;
+    out.write_outputs(&args.out, args.report.as_deref(), &args.data, "frfit fit")?;
     if !quiet {
         print_fit(&out);
         println!("model written to {}", args.out.display());

@@ -6,8 +6,7 @@ use additive_riv::{DelayChoice, Hold, IvMethod, ModeSelection};
 use clap::{Args as ClapArgs, ValueEnum};
 use frf_data::{ProgressSink, Weighting};
 use frfit::options::FitSpec;
-use frfit::pipeline::{FrfType, PipelineConfig};
-use frfit::FrfitError;
+use frfit::pipeline::FrfType;
 use indicatif::{ProgressBar, ProgressStyle};
 use sk_fit::bands::BandSpec;
 use std::sync::Mutex;
@@ -144,11 +143,6 @@ impl FitOptions {
             fs_hz: None,
         }
     }
-
-    /// The pipeline configuration these options describe.
-    pub fn pipeline_config(&self) -> PipelineConfig {
-        self.spec().pipeline_config()
-    }
 }
 
 /// A spinner for a stage of unknown length.
@@ -205,9 +199,4 @@ pub fn progress(quiet: bool) -> (ProgressSink, Option<ProgressBar>) {
         b.set_message(format!("{}{}", p.message, cost));
     });
     (sink, Some(bar))
-}
-
-/// Checks the options against the data ([`FitSpec::check`]).
-pub fn check_options(opts: &FitOptions, data: &frf_data::Frf) -> Result<(), FrfitError> {
-    opts.spec().check(data)
 }

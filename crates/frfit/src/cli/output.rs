@@ -1,38 +1,7 @@
-//! Writing what a fit produced (model JSON, report) and printing its summary.
+//! Printing the summary of a fit (the files are written by
+//! [`PipelineOutput::write_outputs`]).
 
 use frfit::pipeline::PipelineOutput;
-use frfit::report::write_report;
-use frfit::FrfitError;
-use std::path::Path;
-
-/// Writes the model to `model_path` and, with `report`, the report into that directory.
-pub fn write_outputs(
-    out: &PipelineOutput,
-    model_path: &Path,
-    report: Option<&Path>,
-    data_path: &Path,
-    command: &str,
-) -> Result<(), FrfitError> {
-    let file = out
-        .model_file(data_path, command)
-        .map_err(|e| FrfitError::Fit {
-            what: "model file".into(),
-            why: e.to_string(),
-        })?;
-    if let Some(parent) = model_path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| FrfitError::io(parent, e))?;
-    }
-    file.write(model_path).map_err(|e| FrfitError::Io {
-        path: model_path.display().to_string(),
-        message: e.to_string(),
-    })?;
-    if let Some(dir) = report {
-        let title = format!("frfit {} of {}", out.summary.command, data_path.display());
-        let input = out.report_input(&title)?;
-        write_report(dir, &input, &out.summary)?;
-    }
-    Ok(())
-}
 
 /// Prints the modes and the error of a fit.
 pub fn print_fit(out: &PipelineOutput) {

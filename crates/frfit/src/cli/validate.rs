@@ -13,7 +13,7 @@ use clap::{Args as ClapArgs, ValueEnum};
 use frfit::additive_riv::ModelFile;
 use frfit::validation::{FrfValidation, GammaMethod};
 pub use frfit::validation_report::verdict_text;
-use frfit::validation_report::{validate_model, write_validation_dir};
+use frfit::validation_report::{check_alpha, validate_model, write_validation_dir};
 use frfit::FrfitError;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -57,13 +57,8 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
 /// `frfit diagnose --validate` for its final model).
 pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitError> {
     let t0 = Instant::now();
-    if !(args.alpha > 0.0 && args.alpha < 1.0) {
-        return Err(FrfitError::argument(
-            "--alpha",
-            args.alpha,
-            "a probability strictly between 0 and 1 (for example 0.99)",
-        ));
-    }
+    // before the files are read, as the option is checked
+    check_alpha(args.alpha)?;
     let data = load_data(&args.data)?;
     let source = args.model.display().to_string();
     let file = ModelFile::read(&args.model).map_err(|e| FrfitError::Io {

@@ -245,6 +245,35 @@ impl PipelineOutput {
         Ok(file)
     }
 
+    /// Writes the model file to `model_path` (its folder created) and, with `report`,
+    /// the report into that directory (`report.md`, the figures, `summary.json`), as
+    /// `frfit fit`, `frfit diagnose` and the Python package write them; `data_path`
+    /// names the data in the provenance and the report's title, `producer` what ran.
+    pub fn write_outputs(
+        &self,
+        model_path: &std::path::Path,
+        report: Option<&std::path::Path>,
+        data_path: &std::path::Path,
+        producer: &str,
+    ) -> Result<(), FrfitError> {
+        let file = self
+            .model_file(data_path, producer)
+            .map_err(err("model file"))?;
+        if let Some(parent) = model_path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent).map_err(|e| FrfitError::io(parent, e))?;
+        }
+        file.write(model_path).map_err(|e| FrfitError::Io {
+            path: model_path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        if let Some(dir) = report {
+            let title = format!("frfit {} of {}", self.summary.command, data_path.display());
+            let input = self.report_input(&title)?;
+            crate::report::write_report(dir, &input, &self.summary)?;
+        }
+        Ok(())
+    }
+
     /// The CMIF of the band (computed on the first call when the run did not need it).
     pub fn cmif(&self) -> Result<&Cmif, FrfitError> {
         Ok(context::cmif_once(&self.cmif, &self.band)?)
