@@ -1116,6 +1116,31 @@ fn markdown(
             r.replaced_errors.residual_to_noise
         );
     }
+    if let Some(f) = &s.initial.from_fit {
+        let _ = writeln!(
+            md,
+            "**Started from `fit`'s model.** The diagnosis from its own first fit ({} mode{}, \
+             residual/noise {:.3}, median relative error {:.4}) ended at {} mode{}, residual/noise \
+             {:.3}, median relative error {:.4} (accepted: {}), worse on the data than the model \
+             `frfit fit` gives (residual/noise {:.3}, median relative error {:.4}). The diagnosis \
+             below ran again from that model; the initial model above is `fit`'s.\n",
+            f.replaced_initial_modes,
+            plural(f.replaced_initial_modes),
+            f.replaced_initial_errors.residual_to_noise,
+            f.replaced_initial_errors.median_rel,
+            f.replaced_final_modes,
+            plural(f.replaced_final_modes),
+            f.replaced_final_errors.residual_to_noise,
+            f.replaced_final_errors.median_rel,
+            if f.replaced_accepted.is_empty() {
+                "none".to_string()
+            } else {
+                f.replaced_accepted.join(", ")
+            },
+            f.fit_errors.residual_to_noise,
+            f.fit_errors.median_rel,
+        );
+    }
     if !s.initial.repairs.is_empty() {
         let list: Vec<String> = s
             .initial

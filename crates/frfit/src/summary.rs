@@ -111,6 +111,11 @@ pub struct InitialSummary {
     /// plant's modes.
     #[serde(default)]
     pub repairs: Vec<RepairSummary>,
+    /// `frfit diagnose` only: the diagnosis from its own first fit ended worse on the
+    /// data than the model `frfit fit` gives, so it ran again from that model (the
+    /// initial model above is then `fit`'s); what the replaced diagnosis ended with.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from_fit: Option<FromFitSummary>,
 }
 
 /// A restart that replaced the chain's first fit because it ended significantly better.
@@ -126,6 +131,26 @@ pub struct RestartSummary {
     pub f_statistic: f64,
     /// Its critical value.
     pub f_critical: f64,
+}
+
+/// A diagnosis run again from `frfit fit`'s model (see [`InitialSummary::from_fit`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FromFitSummary {
+    /// Why the first diagnosis was replaced: the statistics that ended worse than
+    /// `fit`'s model.
+    pub reason: String,
+    /// The errors of `fit`'s model, the start of the diagnosis reported.
+    pub fit_errors: ErrorStats,
+    /// The first fit of the replaced diagnosis: its modes and errors.
+    pub replaced_initial_modes: usize,
+    /// Its errors.
+    pub replaced_initial_errors: ErrorStats,
+    /// The final model of the replaced diagnosis: its modes.
+    pub replaced_final_modes: usize,
+    /// Its errors.
+    pub replaced_final_errors: ErrorStats,
+    /// The effects the replaced diagnosis accepted, in order.
+    pub replaced_accepted: Vec<String>,
 }
 
 /// One repair of the first fit's modal structure.

@@ -150,6 +150,7 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
             declared: vec![],
             restart: None,
             repairs: vec![],
+            from_fit: None,
         },
         steps,
         verdict: "noise_limited".into(),

@@ -71,8 +71,8 @@ pub struct ExperimentConfig {
     pub input_noise_rms: f64,
     /// Coefficient `alpha` of the actuator nonlinearity `a + alpha a^3` (0: linear).
     pub cubic_nonlinearity: f64,
-    /// Relative level `d` of a stochastic nonlinear contribution (0: none; frequency-domain
-    /// path only). In realization `r` the plant behaves at the excited lines as
+    /// Relative level `d` of a stochastic nonlinear contribution (0: none; on the
+    /// time-domain path in open loop only). In realization `r` the plant behaves at the excited lines as
     /// `P + G_S,r`, the best linear approximation plus the stochastic nonlinear
     /// distortions of Pintelon and Schoukens (*System Identification: A Frequency Domain
     /// Approach*, 2nd ed. 2012, sec. 3.4): every entry and line of `G_S,r` is circular
@@ -859,11 +859,13 @@ impl ClosedLoopExperiment {
         let (ny, nu) = (self.plant.ny(), self.plant.nu());
         let cfg = &self.config;
         let (np, nl, n) = (cfg.periods, self.freq_hz.len(), cfg.grid.period());
-        if cfg.stochastic_distortion != 0.0 {
+        if cfg.stochastic_distortion != 0.0 && self.controller.rank() != 0 {
             return Err(FrfError::invalid(
                 "stochastic_distortion",
                 cfg.stochastic_distortion,
-                "is simulated on the frequency-domain path only",
+                "is simulated on the time-domain path in open loop only (a plant without \
+                 rigid body, RigidBodyController::open_loop): in closed loop the distortion \
+                 would circulate through the controller",
             ));
         }
         if !cfg.plant_dynamics.is_empty() {
@@ -901,6 +903,25 @@ impl ClosedLoopExperiment {
         let mut buf = Vec::with_capacity(n);
         let mut rt = vec![0.0; n];
         self.fft.inverse_pair(&spec, None, &mut buf, &mut rt, None);
+        // The stochastic nonlinear contribution (open loop): in steady state the input at
+        // the excited lines is the reference on input `a_in`, so the contribution to
+        // output `i` is the periodic signal with spectrum `G_S,r[i, a_in](k) R(k)`, the
+        // same in every period (as on the frequency-domain path, where it multiplies the
+        // steady-state input).
+        let distortion: Vec<Vec<f64>> = match self.distortion_lines(r) {
+            None => Vec::new(),
+            Some(gs) => (0..ny)
+                .map(|i| {
+                    let mut spec = vec![C64::new(0.0, 0.0); half];
+                    for (k, &b) in cfg.grid.bins().iter().enumerate() {
+                        spec[b] = gs[k * ny * nu + a_in * ny + i] * rk[k];
+                    }
+                    let mut out = vec![0.0; n];
+                    self.fft.inverse_pair(&spec, None, &mut buf, &mut out, None);
+                    out
+                })
+                .collect(),
+        };
         let (v, nurec) = self.noise_records(e, r);
         let total = (cfg.transient_periods + np) * n;
         let t0 = cfg.transient_periods * n;
@@ -929,7 +950,9 @@ impl ClosedLoopExperiment {
                 dp.output(&x, &zero_u, &mut y);
             }
             for i in 0..ny {
-                ym[i] = y[i] + if v.is_empty() { 0.0 } else { v[i][t] };
+                ym[i] = y[i]
+                    + if v.is_empty() { 0.0 } else { v[i][t] }
+                    + distortion.get(i).map_or(0.0, |d| d[t % n]);
             }
             self.controller.step(&mut xk, &ym, &mut fb);
             u.copy_from_slice(&fb);

@@ -12,10 +12,13 @@
 //! - [`ClosedLoopExperiment`]: single-axis random-phase odd multisine experiments,
 //!   `P` periods x `R` realizations, coloured noise, optional input noise and actuator
 //!   nonlinearity, simulated in the frequency domain (a) or the time domain (b);
+//! - [`piezo_experiment`]: a piezo-actuated `3 x 3` mechanism in open loop with a
+//!   stochastic nonlinear contribution, as time records;
 //! - [`WaferStageExperiment`]: all of it with the defaults of the paper's Section 4.2.
 
 pub mod controller;
 pub mod experiment;
+pub mod piezo;
 pub mod plant;
 pub mod random;
 pub mod signals;
@@ -25,6 +28,7 @@ pub use controller::{ControllerConfig, ControllerState, RigidBodyController};
 pub use experiment::{
     closed_loop_spectral_radius, ClosedLoopExperiment, ExperimentConfig, SimulationPath,
 };
+pub use piezo::{piezo_experiment, piezo_plant, PiezoConfig, PIEZO_MODES};
 pub use plant::{
     truth_delay_samples, DiscreteModalPlant, DiscreteModalState, FlexibleMode, ModalPlant,
     ModalPlantBuilder, RigidBody,

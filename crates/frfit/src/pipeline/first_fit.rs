@@ -46,8 +46,37 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
             chain_runs: Vec::new(),
         });
     }
-    let first = chain_fit(ctx, cfg, &ctx.fitter_config(cfg))?;
-    second_start(ctx, cfg, first)
+    let fc = ctx.fitter_config(cfg);
+    let first = chain_fit(ctx, cfg, &fc)?;
+    second_start(ctx, cfg, first, fc.delay, false)
+}
+
+/// The model `frfit fit` ends with on the band of `ctx` with the options of `cfg`
+/// (its delay handling, the SK second start and the first fit's mode completion),
+/// quietly: what a diagnosis must not end worse than (see [`crate::pipeline::run`]).
+/// `None` when the run starts from a given model (there the two agree).
+pub fn fit_reference(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+) -> Option<Result<FirstFit, FrfitError>> {
+    if cfg.start_model.is_some() {
+        return None;
+    }
+    let fit_cfg = PipelineConfig {
+        diagnose: false,
+        progress: frf_data::ProgressSink::none(),
+        ..cfg.clone()
+    };
+    // `frfit fit` estimates and refines the delay unless one is given
+    let delay = cfg.delay.unwrap_or(additive_riv::DelayChoice::Auto);
+    let fc = additive_riv::FitterConfig {
+        delay,
+        ..ctx.quiet_fitter_config(&fit_cfg)
+    };
+    Some(
+        chain_fit(ctx, &fit_cfg, &fc)
+            .and_then(|first| second_start(ctx, &fit_cfg, first, delay, true)),
+    )
 }
 
 /// The initialiser of the second start ([`second_start`]): Sanathanan-Koerner, whose
@@ -73,10 +102,14 @@ pub const SECOND_START_RESIDUAL: f64 = 3.0;
 /// from the CMIF peaks (above 100 entries it starts from the subspace step, which needs
 /// no peaks either, and SK's common denominator of order ~2x the modes is then
 /// ill-determined and slow), or when the first fit converged near the noise level.
+/// `delay` is the delay handling of the first chain (the second chain takes the same);
+/// `quiet` silences the second chain's progress.
 fn second_start(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     first: FirstFit,
+    delay: additive_riv::DelayChoice,
+    quiet: bool,
 ) -> Result<FirstFit, FrfitError> {
     // The diagnosis does not take the second start: its loop and its delay restart test
     // the effects first, and a common denominator from the start absorbs an undeclared
@@ -130,7 +163,15 @@ fn second_start(
     };
     let mut run_first = run_of(&first);
     let fpe_first = run_first.fpe.unwrap_or(f64::INFINITY);
-    let second = match chain_fit(ctx, &second_cfg, &ctx.fitter_config(&second_cfg)) {
+    let second_fc = additive_riv::FitterConfig {
+        delay,
+        ..if quiet {
+            ctx.quiet_fitter_config(&second_cfg)
+        } else {
+            ctx.fitter_config(&second_cfg)
+        }
+    };
+    let second = match chain_fit(ctx, &second_cfg, &second_fc) {
         Ok(s) => s,
         Err(e) => {
             let mut first = first;

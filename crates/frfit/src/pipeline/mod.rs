@@ -18,10 +18,15 @@
 
 mod context;
 mod first_fit;
+mod from_fit;
 mod summarize;
 
 pub use context::FitContext;
-pub use first_fit::{chain_fit, first_fit, FirstFit, SECOND_START, SECOND_START_RESIDUAL};
+pub use first_fit::{
+    chain_fit, first_fit, fit_reference, FirstFit, SECOND_START, SECOND_START_RESIDUAL,
+};
+pub use from_fit::{ends_worse, Standing};
+use from_fit::{from_fit_if_worse, FromFit, StartRecord};
 pub(crate) use summarize::error_stats;
 pub use summarize::final_model_summary;
 
@@ -334,8 +339,13 @@ pub fn run(
         Some(held) => rayon::join(|| first_fit(&ctx, cfg), || delay_restart(&ctx, cfg, held)),
         None => (first_fit(&ctx, cfg), None),
     };
-    let first = first?;
-    let (fit, fitter_report) = (first.fit, first.report);
+    let FirstFit {
+        fit,
+        report: fitter_report,
+        chain: mut first_chain,
+        links: mut first_links,
+        chain_runs: mut first_chain_runs,
+    } = first?;
     timings.stage(
         if speculate.is_some() {
             "fit (with the delay restart beside it)"
@@ -371,10 +381,12 @@ pub fn run(
         }
     };
     let t = Instant::now();
-    let initial_model = fit.model.clone();
-    let initial_response = initial_model.response_at(&ctx.omega);
-    let initial_errors = error_stats(&ctx.band, &initial_response, &ctx.noise);
+    let mut initial_model = fit.model.clone();
+    let mut initial_response = initial_model.response_at(&ctx.omega);
+    let mut initial_errors = error_stats(&ctx.band, &initial_response, &ctx.noise);
     timings.stage("response and errors", t);
+    let mut fitter_report = fitter_report;
+    let mut from_fit = None;
     let Diagnosis {
         fit,
         steps,
@@ -384,7 +396,32 @@ pub fn run(
         let t = Instant::now();
         let d = diagnose(&ctx, cfg, fit, &initial_response, delay_restart, sk_start)?;
         timings.stage("diagnose", t);
-        d
+        let t = Instant::now();
+        let start = StartRecord {
+            model: &initial_model,
+            errors: initial_errors,
+        };
+        match from_fit_if_worse(&ctx, cfg, d, start)? {
+            FromFit::Kept(d) => d,
+            FromFit::Replaced {
+                diagnosis,
+                reference,
+                response,
+                errors,
+                summary,
+            } => {
+                timings.stage("diagnose from fit's model", t);
+                initial_model = reference.fit.model;
+                initial_response = response;
+                initial_errors = errors;
+                fitter_report = reference.report;
+                first_chain = reference.chain;
+                first_links = reference.links;
+                first_chain_runs = reference.chain_runs;
+                from_fit = Some(summary);
+                diagnosis
+            }
+        }
     } else {
         Diagnosis {
             fit,
@@ -464,13 +501,14 @@ pub fn run(
             distortion,
             final_errors,
             timings: timings.0,
-            chain: first.chain.clone(),
-            chain_runs: first.chain_runs.clone(),
+            chain: first_chain.clone(),
+            chain_runs: first_chain_runs,
+            from_fit,
             // the diagnosis refits the model: the chain's covariance no longer applies
             uncertainty: if cfg.diagnose {
                 None
             } else {
-                summarize::ml_uncertainty(&first.links)
+                summarize::ml_uncertainty(&first_links)
             },
         },
     );
@@ -482,8 +520,8 @@ pub fn run(
         band,
         fit,
         fitter_report,
-        chain: first.chain,
-        links: first.links,
+        chain: first_chain,
+        links: first_links,
         noise,
         cmif,
         peaks,

@@ -326,6 +326,8 @@ pub(crate) struct RunRecord<'a> {
     pub chain_runs: Vec<crate::chain::ChainRun>,
     /// The refiner's uncertainty of the final model, when it has one.
     pub uncertainty: Option<UncertaintySummary>,
+    /// The diagnosis ran again from `fit`'s model ([`super::from_fit`]).
+    pub from_fit: Option<crate::summary::FromFitSummary>,
 }
 
 /// The uncertainty of the ML link of `links` (its report in `details`), for a final
@@ -406,6 +408,7 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
             declared: ctx.declared_list.clone(),
             restart: run.restart,
             repairs: repair_summaries(run.fitter_report.repair.as_ref()),
+            from_fit: run.from_fit,
         },
         steps: run.steps,
         verdict: verdict.into(),

@@ -1,0 +1,199 @@
+//! A diagnosis never ends worse on the data than `frfit fit` does.
+//!
+//! `frfit diagnose` starts from its own first fit (the declared delay held, no SK
+//! second start, with `--modes N` no mode added), so that an undeclared delay or a
+//! missed mode is found as a step. On measured data that start can be far poorer than
+//! the model `frfit fit` ends with (a fitted delay, the second start's common
+//! denominator, the first fit's completed modes), and the loop, which only adds effects
+//! that pass their tests, may not climb back. [`crate::pipeline::run`] therefore compares
+//! the diagnosis's final model with `fit`'s model ([`super::fit_reference`]); when the
+//! diagnosis ends worse than it ([`ends_worse`]), the diagnosis runs again from `fit`'s
+//! model, and when even that ends worse, `fit`'s model is the final one. The summary
+//! says so ([`FromFitSummary`]). A diagnosis whose residual is at the noise level it is
+//! judged against needs no comparison (no model is significantly better on the data):
+//! `fit`'s model is then not fitted at all.
+
+use super::{err, error_stats, FirstFit, FitContext, PipelineConfig};
+use crate::diagnose::{diagnose, Diagnosis};
+use crate::summary::{ErrorStats, FromFitSummary};
+use crate::FrfitError;
+use additive_riv::AdditiveModel;
+use frf_data::ModelStructure;
+use realize::ResponseGrid;
+use validation::residual::analyze_residual;
+
+/// A model's weighted cost on the band, its parameters and its error statistics.
+#[derive(Debug, Clone, Copy)]
+pub struct Standing {
+    /// Weighted cost on the band's fit data.
+    pub cost: f64,
+    /// Real parameters.
+    pub n_params: usize,
+    /// Error statistics against the data.
+    pub errors: ErrorStats,
+}
+
+impl Standing {
+    /// The standing of `model` (whose response at the band's lines is `response`).
+    pub fn of(ctx: &FitContext, model: &AdditiveModel, response: &ResponseGrid) -> Self {
+        Self {
+            cost: additive_riv::complete::cost_of(model, &ctx.fit_data),
+            n_params: model.n_params(),
+            errors: error_stats(&ctx.band, response, &ctx.noise),
+        }
+    }
+}
+
+/// Whether a chi-squared excess `excess` (a sum of squares in units of the noise
+/// variance) between two models is significant when the better one spends `dp` more
+/// parameters: above `dp + 5 sqrt(2 dp)`, five standard deviations of `chi2(dp)` above
+/// its mean (`dp` at least 1). Under the null that the model with fewer parameters is
+/// as good, its excess is `chi2(dp)` distributed.
+fn significant_excess(excess: f64, dp: f64) -> bool {
+    let dp = dp.max(1.0);
+    excess > dp + 5.0 * (2.0 * dp).sqrt()
+}
+
+/// Why `a` ends significantly worse on the data than `b`, or `None` when it does not.
+/// Two readings of the same residuals, either one suffices:
+/// - the weighted cost (the criterion both were fitted by): `(c_a - c_b) / s^2` with
+///   `s^2 = c_b / (N - p_b)` the noise scale of `b`, significant by
+///   [`significant_excess`] with `dp = p_b - p_a`;
+/// - the residual against the noise level (the summary's residual/noise `r`):
+///   `N (r_a^2 - r_b^2)` is the same excess in units of the measured or estimated
+///   noise variance, whatever the weighting.
+///
+/// A model with fewer parameters is allowed the cost of the ones it does not spend: two
+/// models at the noise level differ by a few percent in `r` without being different.
+pub fn ends_worse(a: &Standing, b: &Standing, n_obs: usize) -> Option<String> {
+    let n = n_obs as f64;
+    let dp = b.n_params as f64 - a.n_params as f64;
+    let s2 = b.cost / (n - b.n_params as f64).max(1.0);
+    let mut why = Vec::new();
+    if s2 > 0.0 && significant_excess((a.cost - b.cost) / s2, dp) {
+        why.push(format!(
+            "weighted cost {:.4e} against {:.4e}",
+            a.cost, b.cost
+        ));
+    }
+    let (ra, rb) = (a.errors.residual_to_noise, b.errors.residual_to_noise);
+    if ra.is_finite() && rb.is_finite() && significant_excess(n * (ra * ra - rb * rb), dp) {
+        why.push(format!("residual/noise {ra:.4} against {rb:.4}"));
+    }
+    (!why.is_empty()).then(|| {
+        format!(
+            "{}; median relative error {:.4} against {:.4}",
+            why.join(", "),
+            a.errors.median_rel,
+            b.errors.median_rel
+        )
+    })
+}
+
+/// The first fit a diagnosis started from, for the summary of a replaced one.
+pub struct StartRecord<'a> {
+    /// Its model.
+    pub model: &'a AdditiveModel,
+    /// Its errors.
+    pub errors: ErrorStats,
+}
+
+/// What [`from_fit_if_worse`] decided.
+pub enum FromFit {
+    /// The diagnosis ended no worse than `fit`'s model: kept.
+    Kept(Diagnosis),
+    /// The diagnosis from `fit`'s model (or that model itself) replaced it.
+    Replaced {
+        /// The diagnosis from `fit`'s model.
+        diagnosis: Diagnosis,
+        /// `fit`'s first fit, the new start.
+        reference: FirstFit,
+        /// Its response at the band's lines.
+        response: ResponseGrid,
+        /// Its errors.
+        errors: ErrorStats,
+        /// What the summary says.
+        summary: FromFitSummary,
+    },
+}
+
+/// Keeps `diagnosis` when its final residual is at the noise level it is judged against
+/// (no model can then be significantly better on the data) or when it ends no worse
+/// ([`ends_worse`]) than `frfit fit`'s model on the same band and options
+/// ([`super::fit_reference`], fitted here only when needed). Otherwise runs the diagnosis
+/// again from `fit`'s model and returns it, with that model as its start. When that
+/// second diagnosis ends worse than `fit`'s model too (its loop's guard compares weighted
+/// costs only), `fit`'s model itself is its final model and its messages say why.
+pub fn from_fit_if_worse(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    diagnosis: Diagnosis,
+    start: StartRecord<'_>,
+) -> Result<FromFit, FrfitError> {
+    let final_response = diagnosis.fit.model.response_at(&ctx.omega);
+    let analysis = analyze_residual(
+        &ctx.band,
+        &final_response,
+        ctx.judging_noise(),
+        &ctx.residual_config(&diagnosis.fit.model),
+    )
+    .map_err(err("residual analysis"))?;
+    if !analysis.significant {
+        return Ok(FromFit::Kept(diagnosis));
+    }
+    let Some(Ok(reference)) = super::fit_reference(ctx, cfg) else {
+        // a given start model (the two agree), or `fit`'s chain failed where the
+        // diagnosis's did not: nothing to compare with
+        return Ok(FromFit::Kept(diagnosis));
+    };
+    let n_obs = ctx.fit_data.observations();
+    let ours = Standing::of(ctx, &diagnosis.fit.model, &final_response);
+    let ref_response = reference.fit.model.response_at(&ctx.omega);
+    let theirs = Standing::of(ctx, &reference.fit.model, &ref_response);
+    let Some(reason) = ends_worse(&ours, &theirs, n_obs) else {
+        return Ok(FromFit::Kept(diagnosis));
+    };
+    let replaced_accepted: Vec<String> = diagnosis
+        .steps
+        .iter()
+        .filter(|s| s.accepted)
+        .map(|s| s.effect.clone())
+        .collect();
+    let summary = FromFitSummary {
+        reason: format!(
+            "the diagnosis from its own first fit ended worse on the data than the model `frfit fit` gives ({reason}); it ran again from that model"
+        ),
+        fit_errors: theirs.errors,
+        replaced_initial_modes: start.model.modes().len(),
+        replaced_initial_errors: start.errors,
+        replaced_final_modes: diagnosis.fit.model.modes().len(),
+        replaced_final_errors: ours.errors,
+        replaced_accepted,
+    };
+    cfg.progress.step(
+        "diagnose",
+        0,
+        None,
+        None,
+        "starting again from `fit`'s model",
+    );
+    let mut second = diagnose(ctx, cfg, reference.fit.clone(), &ref_response, None, None)?;
+    second.fit.messages.insert(0, summary.reason.clone());
+    let second_response = second.fit.model.response_at(&ctx.omega);
+    let second_standing = Standing::of(ctx, &second.fit.model, &second_response);
+    if let Some(why) = ends_worse(&second_standing, &theirs, n_obs) {
+        let mut kept = reference.fit.clone();
+        kept.messages = std::mem::take(&mut second.fit.messages);
+        kept.messages.push(format!(
+            "the diagnosis from `fit`'s model ended worse than that model ({why}); `fit`'s model is the final model, and the steps accepted on the way are not in it"
+        ));
+        second.fit = kept;
+    }
+    Ok(FromFit::Replaced {
+        diagnosis: second,
+        response: ref_response,
+        errors: theirs.errors,
+        reference,
+        summary,
+    })
+}
