@@ -20,6 +20,9 @@ pub struct Declared {
     /// Realizations the variance was estimated from ("10 periods x 10 realizations", or
     /// metadata `realizations`): it sets the degrees of freedom of the variance.
     pub realizations: Option<usize>,
+    /// Periods per realization the variance was estimated over (the comment word
+    /// `periods=P` of `frfit nonparametric`, or metadata `periods`).
+    pub periods: Option<usize>,
     /// Where each value came from (for reports).
     pub sources: Vec<String>,
 }
@@ -137,8 +140,30 @@ pub fn declared(frf: &Frf) -> Declared {
         d.sources
             .push(format!("{r} realizations from metadata `realizations`"));
     }
+    if let Some(p) = frf
+        .metadata
+        .iter()
+        .find(|(k, _)| k.eq_ignore_ascii_case("periods"))
+        .and_then(|(_, v)| v.trim().parse::<usize>().ok())
+    {
+        d.periods = Some(p);
+    }
     for c in &frf.comments {
         let lower = c.to_ascii_lowercase();
+        // the words `periods=P realizations=R` of `frfit nonparametric` (FORMATS.md)
+        for w in lower.split(|ch: char| ch.is_whitespace() || ch == ',' || ch == ';') {
+            let value = |key: &str| w.strip_prefix(key).and_then(|v| v.parse::<usize>().ok());
+            if let (Some(r), None) = (value("realizations="), d.realizations) {
+                d.realizations = Some(r);
+                d.sources.push(format!(
+                    "{r} realizations from the comment \"{}\"",
+                    c.trim()
+                ));
+            }
+            if let (Some(p), None) = (value("periods="), d.periods) {
+                d.periods = Some(p);
+            }
+        }
         if d.realizations.is_none() {
             // "<n> realizations": the number right before the word
             let words: Vec<&str> = lower

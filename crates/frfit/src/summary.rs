@@ -200,6 +200,22 @@ pub struct StepSummary {
     /// was in, or replaced by its rational twin): that step's number (1-based).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub superseded_by: Option<usize>,
+    /// The step's check on data it was not fitted to: the weighted cost on interleaved
+    /// held-out lines without and with it (the round's best trial only; a step that
+    /// raises it is not accepted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<HeldOutSummary>,
+}
+
+/// A step's check on interleaved held-out lines: the model before and after the step,
+/// each refitted on the even lines and tested on the odd ones, then the reverse; the
+/// summed weighted costs on the held-out lines.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutSummary {
+    /// Held-out cost without the step.
+    pub before: f64,
+    /// Held-out cost with it.
+    pub after: f64,
 }
 
 /// The final model, briefly.

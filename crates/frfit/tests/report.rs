@@ -213,6 +213,7 @@ fn two_steps() -> Vec<StepSummary> {
             after: errors(0.008, 0.021, 1.02),
             figure: None,
             superseded_by: None,
+            held_out: None,
         },
         StepSummary {
             effect: "delay".into(),
@@ -227,6 +228,7 @@ fn two_steps() -> Vec<StepSummary> {
             after: errors(0.008, 0.021, 1.019),
             figure: Some("delay_step.svg".into()),
             superseded_by: None,
+            held_out: None,
         },
     ]
 }

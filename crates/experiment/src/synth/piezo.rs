@@ -42,7 +42,8 @@ pub struct PiezoConfig {
     pub realizations: usize,
     /// Relative level of the stochastic nonlinear contribution (default 0.03).
     pub distortion: f64,
-    /// White output noise, RMS per sample (default 2e-3).
+    /// White output noise, RMS per sample (default 4e-3: the distortion is then 10 to 15
+    /// times the noise in amplitude).
     pub noise_rms: f64,
     /// RMS of each experiment's multisine (default 1).
     pub rms: f64,
@@ -58,7 +59,7 @@ impl Default for PiezoConfig {
             periods: 2,
             realizations: 2,
             distortion: 0.03,
-            noise_rms: 2e-3,
+            noise_rms: 4e-3,
             rms: 1.0,
         }
     }

@@ -23,6 +23,7 @@
 mod accept;
 mod candidate;
 mod fitted;
+pub mod held_out;
 mod restart;
 mod trial;
 
@@ -211,7 +212,8 @@ pub fn diagnose(
             break;
         };
         let before = error_stats(&ctx.band, &st.response, &ctx.noise);
-        let best = accept::best(&trials, &st.model, st.cost);
+        let mut trials = trials;
+        let best = best_held_out(ctx, &riv, &mut trials, &st.model, st.cost);
         let mut accepted_model = None;
         for (i, tr) in trials.into_iter().enumerate() {
             let accepted = Some(i) == best;
@@ -586,6 +588,31 @@ fn round(
     (!trials.is_empty()).then_some(trials)
 }
 
+/// The round's best trial ([`accept::best`]) that also lowers the error on interleaved
+/// held-out lines ([`held_out::held_out`]): a best trial that raises it is held back
+/// (its evidence says why) and the next best is checked. A check that cannot be made
+/// (too few lines, a failed refit) does not hold a trial back.
+fn best_held_out(
+    ctx: &FitContext,
+    riv: &RivConfig,
+    trials: &mut [Trial],
+    current: &AdditiveModel,
+    current_cost: f64,
+) -> Option<usize> {
+    loop {
+        let i = accept::best(trials, current, current_cost)?;
+        let h = held_out::held_out(&ctx.fit_data, riv, current, &trials[i].model);
+        trials[i].held_out = h;
+        match h {
+            Some(h) if !h.lowers() => trials[i].hold_back(&format!(
+                "not accepted: on interleaved held-out lines (refitted on the even lines and tested on the odd ones, and the reverse) it raises the weighted cost from {:.4e} to {:.4e}",
+                h.before, h.after
+            )),
+            _ => return Some(i),
+        }
+    }
+}
+
 /// Iterations of a candidate's screening refit: a refit that has not converged by then
 /// continues only when its cost decrease is at least [`SCREEN_KEEP`] of the round's best
 /// (most of a refit's decrease comes in its first iterations; the rest are spent on
@@ -653,6 +680,10 @@ fn step_summaries(
         after,
         figure: None,
         superseded_by: None,
+        held_out: tr.held_out.map(|h| crate::summary::HeldOutSummary {
+            before: h.before,
+            after: h.after,
+        }),
     };
     if tr.joint_modes.is_empty() {
         return vec![step(&tr.params, tr.evidence.clone())];

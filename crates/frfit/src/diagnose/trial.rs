@@ -37,6 +37,9 @@ pub struct Trial {
     pub screened: Option<Screened>,
     /// The candidate refitted, for a trial of one proposed candidate.
     pub candidate: Option<super::Candidate>,
+    /// Its check on interleaved held-out lines ([`super::held_out`]), when it was the
+    /// round's best.
+    pub held_out: Option<super::held_out::HeldOut>,
 }
 
 /// A candidate refit stopped at the screening cap ([`refit_candidate`] with `cap`).
@@ -345,6 +348,7 @@ pub fn joint_missed_modes(
         joint_modes: joint,
         screened: None,
         candidate: None,
+        held_out: None,
     })
 }
 
@@ -432,6 +436,7 @@ pub fn common_denominator_modes(
         joint_modes: joint,
         screened: None,
         candidate: None,
+        held_out: None,
     })
 }
 
@@ -490,6 +495,7 @@ pub fn restart_with_delay(
         joint_modes: Vec::new(),
         screened: None,
         candidate: None,
+        held_out: None,
     })
 }
 
@@ -600,6 +606,7 @@ pub fn suspended_body(
             joint_modes: Vec::new(),
             screened: None,
             candidate: None,
+            held_out: None,
         },
         accepted,
     ))
@@ -669,6 +676,7 @@ fn judge(
         joint_modes: Vec::new(),
         screened: None,
         candidate: Some(candidate.clone()),
+        held_out: None,
     }
 }
 

@@ -68,8 +68,11 @@ pub struct FitContext {
     /// Angular frequencies of the band's lines, rad/s.
     pub omega: Vec<f64>,
     /// Real degrees of freedom of the variance, `2 (R - 1)` when it was estimated from
-    /// `R >= 3` declared realizations.
+    /// `R >= 3` declared realizations, or those of the pooled variance.
     pub variance_dof: Option<f64>,
+    /// How the variance was pooled over neighbouring lines
+    /// ([`super::pooled_variance`]), when its declared degrees of freedom were few.
+    pub pooled: Option<super::pooled_variance::Pooled>,
 }
 
 impl FitContext {
@@ -104,6 +107,9 @@ impl FitContext {
         let band = data.band(lo, hi)?.to_frf();
         let decl: Declared = declared(data);
         let fs_hz = cfg.fs_hz.or(decl.fs_hz);
+        // a variance of few degrees of freedom per line, pooled over neighbouring lines
+        // before it weighs and tests anything
+        let (band, pooled) = super::pooled_variance::pool_variance(band, &decl)?;
         let noise = noise_level(&band).map_err(err("noise level"))?;
         // the floor and the local floor as a noise level share one computation of the
         // stencils (seconds at 50 x 50 entries); the report compares the final residual
@@ -142,6 +148,9 @@ impl FitContext {
         let omega = band.omegas();
         timings.stage("load+band", t);
         let mut declared_list = decl.sources.clone();
+        if let Some(p) = &pooled {
+            declared_list.push(p.describe());
+        }
         if let Some(h) = cfg.hold {
             declared_list.push(format!("hold {h:?} (command line)"));
         }
@@ -174,9 +183,11 @@ impl FitContext {
             }
             (d, _) => d,
         };
-        // a variance estimated from R realizations has 2 (R - 1) real degrees of freedom
-        let variance_dof = match (band.has_variance(), decl.realizations) {
-            (true, Some(r)) if r >= 3 => Some(2.0 * (r as f64 - 1.0)),
+        // a variance estimated from R realizations has 2 (R - 1) real degrees of freedom,
+        // a pooled one those of its window
+        let variance_dof = match (band.has_variance(), decl.realizations, &pooled) {
+            (true, _, Some(p)) => Some(p.dof),
+            (true, Some(r), None) if r >= 3 => Some(2.0 * (r as f64 - 1.0)),
             _ => None,
         };
         // the data's delay is read by the chain when it estimates the delay and by the
@@ -206,6 +217,7 @@ impl FitContext {
             delay_estimate,
             omega,
             variance_dof,
+            pooled,
         })
     }
 
