@@ -98,23 +98,26 @@ pub struct StartRecord<'a> {
     pub errors: ErrorStats,
 }
 
+/// The diagnosis from `fit`'s model that replaced one ([`FromFit::Replaced`]).
+pub struct Replacement {
+    /// The diagnosis from `fit`'s model.
+    pub diagnosis: Diagnosis,
+    /// `fit`'s first fit, the new start.
+    pub reference: FirstFit,
+    /// Its response at the band's lines.
+    pub response: ResponseGrid,
+    /// Its errors.
+    pub errors: ErrorStats,
+    /// What the summary says.
+    pub summary: FromFitSummary,
+}
+
 /// What [`from_fit_if_worse`] decided.
 pub enum FromFit {
     /// The diagnosis ended no worse than `fit`'s model: kept.
-    Kept(Diagnosis),
+    Kept(Box<Diagnosis>),
     /// The diagnosis from `fit`'s model (or that model itself) replaced it.
-    Replaced {
-        /// The diagnosis from `fit`'s model.
-        diagnosis: Diagnosis,
-        /// `fit`'s first fit, the new start.
-        reference: FirstFit,
-        /// Its response at the band's lines.
-        response: ResponseGrid,
-        /// Its errors.
-        errors: ErrorStats,
-        /// What the summary says.
-        summary: FromFitSummary,
-    },
+    Replaced(Box<Replacement>),
 }
 
 /// Keeps `diagnosis` when its final residual is at the noise level it is judged against
@@ -139,19 +142,19 @@ pub fn from_fit_if_worse(
     )
     .map_err(err("residual analysis"))?;
     if !analysis.significant {
-        return Ok(FromFit::Kept(diagnosis));
+        return Ok(FromFit::Kept(Box::new(diagnosis)));
     }
     let Some(Ok(reference)) = super::fit_reference(ctx, cfg) else {
         // a given start model (the two agree), or `fit`'s chain failed where the
         // diagnosis's did not: nothing to compare with
-        return Ok(FromFit::Kept(diagnosis));
+        return Ok(FromFit::Kept(Box::new(diagnosis)));
     };
     let n_obs = ctx.fit_data.observations();
     let ours = Standing::of(ctx, &diagnosis.fit.model, &final_response);
     let ref_response = reference.fit.model.response_at(&ctx.omega);
     let theirs = Standing::of(ctx, &reference.fit.model, &ref_response);
     let Some(reason) = ends_worse(&ours, &theirs, n_obs) else {
-        return Ok(FromFit::Kept(diagnosis));
+        return Ok(FromFit::Kept(Box::new(diagnosis)));
     };
     let replaced_accepted: Vec<String> = diagnosis
         .steps
@@ -189,11 +192,11 @@ pub fn from_fit_if_worse(
         ));
         second.fit = kept;
     }
-    Ok(FromFit::Replaced {
+    Ok(FromFit::Replaced(Box::new(Replacement {
         diagnosis: second,
         response: ref_response,
         errors: theirs.errors,
         reference,
         summary,
-    })
+    })))
 }

@@ -27,7 +27,7 @@ pub use first_fit::{
     chain_fit, first_fit, fit_reference, FirstFit, SECOND_START, SECOND_START_RESIDUAL,
 };
 pub use from_fit::{ends_worse, Standing};
-use from_fit::{from_fit_if_worse, FromFit, StartRecord};
+use from_fit::{from_fit_if_worse, FromFit, Replacement, StartRecord};
 pub(crate) use summarize::error_stats;
 pub use summarize::final_model_summary;
 
@@ -403,14 +403,15 @@ pub fn run(
             errors: initial_errors,
         };
         match from_fit_if_worse(&ctx, cfg, d, start)? {
-            FromFit::Kept(d) => d,
-            FromFit::Replaced {
-                diagnosis,
-                reference,
-                response,
-                errors,
-                summary,
-            } => {
+            FromFit::Kept(d) => *d,
+            FromFit::Replaced(r) => {
+                let Replacement {
+                    diagnosis,
+                    reference,
+                    response,
+                    errors,
+                    summary,
+                } = *r;
                 timings.stage("diagnose from fit's model", t);
                 initial_model = reference.fit.model;
                 initial_response = response;

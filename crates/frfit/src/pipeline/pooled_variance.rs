@@ -62,7 +62,7 @@ pub fn variance_dof_per_line(decl: &Declared) -> Option<f64> {
 /// The half-width `h` of the narrowest window of `2 h + 1` lines whose pooled variance
 /// reaches [`MIN_POOLED_DOF`] from `dof_per_line`; 0 when one line does.
 pub fn half_window(dof_per_line: f64) -> usize {
-    if !(dof_per_line > 0.0) || dof_per_line >= MIN_POOLED_DOF {
+    if dof_per_line.is_nan() || dof_per_line <= 0.0 || dof_per_line >= MIN_POOLED_DOF {
         return 0;
     }
     let lines = (MIN_POOLED_DOF / dof_per_line).ceil() as usize;
