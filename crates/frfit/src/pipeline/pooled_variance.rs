@@ -10,8 +10,8 @@
 //! variance changes slowly from line to line (it follows `|G|^2` for the nonlinear part
 //! and the input spectrum for the noise), so the mean of the estimates over `2 h + 1`
 //! neighbouring lines (the pooled variance, per entry) estimates it with `2 h + 1` times
-//! the degrees of freedom. The window is the narrowest that reaches
-//! [`MIN_POOLED_DOF`]; a resonance a few lines wide is smeared over it, which only
+//! the degrees of freedom. Pooled are variances below [`POOL_BELOW_DOF`] (`R <= 5`); the
+//! window is the narrowest that reaches [`MIN_POOLED_DOF`]; a resonance a few lines wide is smeared over it, which only
 //! flattens the weights there (Pintelon and Schoukens, *System Identification: A
 //! Frequency Domain Approach*, 2nd ed., on sample variances with few realizations and the
 //! smoothing of their weights).
@@ -20,10 +20,15 @@ use crate::declared::Declared;
 use crate::FrfitError;
 use frf_data::{Frf, FrfDataset};
 
-/// Degrees of freedom a line's variance should have before its inverse is a weight and
-/// its ratio a test statistic: 20 (the mean of `F(2, 20)` is 1.11, its variance 1.4;
-/// `F(2, 2)` has neither).
+/// Degrees of freedom a pooled variance reaches: 20 (the mean of `F(2, 20)` is 1.11,
+/// its variance 1.4; `F(2, 2)` has neither).
 pub const MIN_POOLED_DOF: f64 = 20.0;
+
+/// A variance is pooled only below this many degrees of freedom per line: 10 (`R <= 5`
+/// realizations). From 10 on, the mean of `F(., d)`, `d / (d - 2)`, is within 25 % of 1
+/// and the residual tests correct for it (`ResidualConfig::variance_dof`); the usual
+/// 10-realization measurement (18) keeps its per-line variance and its resolution.
+pub const POOL_BELOW_DOF: f64 = 10.0;
 
 /// How a variance was pooled.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,9 +65,10 @@ pub fn variance_dof_per_line(decl: &Declared) -> Option<f64> {
 }
 
 /// The half-width `h` of the narrowest window of `2 h + 1` lines whose pooled variance
-/// reaches [`MIN_POOLED_DOF`] from `dof_per_line`; 0 when one line does.
+/// reaches [`MIN_POOLED_DOF`] from `dof_per_line`; 0 (no pooling) from
+/// [`POOL_BELOW_DOF`] on.
 pub fn half_window(dof_per_line: f64) -> usize {
-    if dof_per_line.is_nan() || dof_per_line <= 0.0 || dof_per_line >= MIN_POOLED_DOF {
+    if dof_per_line.is_nan() || dof_per_line <= 0.0 || dof_per_line >= POOL_BELOW_DOF {
         return 0;
     }
     let lines = (MIN_POOLED_DOF / dof_per_line).ceil() as usize;
@@ -70,7 +76,7 @@ pub fn half_window(dof_per_line: f64) -> usize {
 }
 
 /// `band` with its variance pooled over neighbouring lines when the declared degrees of
-/// freedom per line are below [`MIN_POOLED_DOF`] (see the module documentation), and how;
+/// freedom per line are below [`POOL_BELOW_DOF`] (see the module documentation), and how;
 /// `band` unchanged otherwise. Each entry's pooled variance at line `k` is the mean of
 /// its positive finite variances at lines `k - h ..= k + h` (fewer at the band edges).
 pub fn pool_variance(band: Frf, decl: &Declared) -> Result<(Frf, Option<Pooled>), FrfitError> {
@@ -113,10 +119,10 @@ mod tests {
         assert_eq!(half_window(2.0), 5); // 11 lines, 22 dof
         assert_eq!(half_window(4.0), 2); // 5 lines, 20 dof
         assert_eq!(half_window(8.0), 1); // 3 lines, 24 dof
-        assert_eq!(half_window(18.0), 1);
-        assert_eq!(half_window(20.0), 0);
+        assert_eq!(half_window(10.0), 0);
+        assert_eq!(half_window(18.0), 0);
         assert_eq!(half_window(36.0), 0);
-        for d in [2.0, 4.0, 6.0, 8.0, 10.0, 14.0] {
+        for d in [2.0, 4.0, 6.0, 8.0] {
             let h = half_window(d);
             assert!(d * (2 * h + 1) as f64 >= MIN_POOLED_DOF, "{d}");
             assert!(h == 0 || d * ((2 * h - 1) as f64) < MIN_POOLED_DOF, "{d}");
