@@ -181,7 +181,9 @@ pub fn spectra_from_mat_files(
     };
     let cfg = spec.record_config(fs)?;
     let spectra = spectra_from_records(&experiments, &cfg)?;
-    Ok((group_realizations(spectra, spec.realizations)?, notes))
+    let mut grouped = group_realizations(spectra, spec.realizations)?;
+    grouped.comments.push(sampling_comment(fs));
+    Ok((grouped, notes))
 }
 
 /// Per experiment, per channel, the samples.
@@ -322,7 +324,18 @@ pub fn spectra_from_arrays(
     })?;
     let cfg = spec.record_config(fs)?;
     let spectra = spectra_from_records(experiments, &cfg)?;
-    group_realizations(spectra, spec.realizations)
+    let mut grouped = group_realizations(spectra, spec.realizations)?;
+    grouped.comments.push(sampling_comment(fs));
+    Ok(grouped)
+}
+
+/// The comment that states the records' sample rate in the words `fit` and `diagnose`
+/// read ("sampling <fs> Hz"): the diagnosis can then test a zero-order hold (it is not
+/// declared: the records do not say whether the actuator's converter holds).
+pub fn sampling_comment(fs: f64) -> String {
+    format!(
+        "sampling {fs} Hz (the sample rate of the time records; a hold is not declared: give --hold zoh:{fs} when the actuator's converter holds)"
+    )
 }
 
 /// Groups the experiments of time records into random-phase realizations (the robust

@@ -1,8 +1,10 @@
 //! A variance estimated from few realizations is itself noisy: `|E|^2 / var` follows an
 //! F rather than a chi-square distribution, its mean is inflated by `d2 / (d2 - 2)`
 //! (2 with 3 realizations) and its tail is polynomial. When the file says how many
-//! realizations the variance came from, the residual analysis accounts for it, and a
-//! model at the noise level is called noise-limited. Simulated wafer stage, no files.
+//! realizations the variance came from, the variance is pooled over neighbouring lines
+//! (`pipeline::pooled_variance`: 5 lines, 20 degrees of freedom for 3 realizations), the
+//! residual analysis accounts for the pooled degrees of freedom, and a model at the noise
+//! level is called noise-limited. Simulated wafer stage, no files.
 
 mod common;
 
@@ -45,8 +47,20 @@ fn three_realizations_are_noise_limited_when_declared() {
     assert_eq!(s.verdict, "noise_limited");
     assert!(s.steps.iter().all(|x| !x.accepted), "nothing added");
     assert_eq!(s.final_model.modes.len(), 17);
-    // sqrt(d2 / (d2 - 2)) = sqrt(2): the inflation of an estimated variance
-    assert!((s.final_errors.residual_to_noise - 2f64.sqrt()).abs() < 0.1);
+    // the variance of 3 realizations (4 degrees of freedom per line) is pooled over 5
+    // neighbouring lines (20): the residual/noise ratio at the truth is
+    // sqrt(d2 / (d2 - 2)) = sqrt(20 / 18) = 1.054, where the per-line variance gave
+    // sqrt(2)
+    assert!(s
+        .initial
+        .declared
+        .iter()
+        .any(|d| d.contains("pooled over 5 neighbouring lines")));
+    assert!(
+        (s.final_errors.residual_to_noise - (20f64 / 18.0).sqrt()).abs() < 0.05,
+        "{}",
+        s.final_errors.residual_to_noise
+    );
 
     // The counter-check: the same data without the declaration are taken as having a
     // known variance, and the inflated residual is (wrongly, but as documented) not

@@ -39,6 +39,8 @@ fn piezo_data(seed: u64) -> (Frf, Frf, f64) {
         "periods={} realizations={} experiments={}",
         est.periods, est.realizations, est.n_experiments
     ));
+    frf.comments
+        .push(frfit::nonparametric::sampling_comment(6400.0));
     (frf, truth, ratio)
 }
 

@@ -47,6 +47,12 @@ pub struct PiezoConfig {
     pub noise_rms: f64,
     /// RMS of each experiment's multisine (default 1).
     pub rms: f64,
+    /// Seed of the phases, the noise and the distortion when it differs from the plant's
+    /// `seed` (default `None`): a test record of the same plant with new multisines.
+    pub phase_seed: Option<u64>,
+    /// Keep the time records (default false; see
+    /// [`ExperimentConfig::keep_time_signals`]).
+    pub keep_time_signals: bool,
 }
 
 impl Default for PiezoConfig {
@@ -61,6 +67,8 @@ impl Default for PiezoConfig {
             distortion: 0.03,
             noise_rms: 4e-3,
             rms: 1.0,
+            phase_seed: None,
+            keep_time_signals: false,
         }
     }
 }
@@ -109,7 +117,8 @@ pub fn piezo_experiment(cfg: &PiezoConfig) -> Result<ClosedLoopExperiment, FrfEr
     let plant = piezo_plant(cfg.seed)?;
     let n_bins = (cfg.f_max_hz * cfg.period as f64 / cfg.fs).floor() as usize;
     let grid = LineGrid::from_bins(cfg.fs, cfg.period, (1..=n_bins).collect())?;
-    let mut ec = ExperimentConfig::wafer_stage(cfg.seed);
+    let mut ec = ExperimentConfig::wafer_stage(cfg.phase_seed.unwrap_or(cfg.seed));
+    ec.keep_time_signals = cfg.keep_time_signals;
     ec.grid = grid;
     ec.periods = cfg.periods;
     ec.realizations = cfg.realizations;

@@ -34,6 +34,55 @@ fn header_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
     Some(rest.trim_start())
 }
 
+/// The bytes of a `.npy` file (format version 1.0, little-endian `f8`, C order) holding
+/// `array`; its data must have the length its shape says.
+pub fn npy_bytes(array: &NpyArray) -> Result<Vec<u8>, FrfError> {
+    let n: usize = array.shape.iter().product();
+    if n != array.data.len() {
+        return Err(FrfError::Dimension {
+            what: "npy array".into(),
+            expected: format!("{n} values for shape {:?}", array.shape),
+            got: format!("{} values", array.data.len()),
+        });
+    }
+    let shape = match array.shape.len() {
+        1 => format!("({},)", array.shape[0]),
+        _ => format!(
+            "({})",
+            array
+                .shape
+                .iter()
+                .map(|d| d.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
+    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
+    // magic (6) + version (2) + header length (2) + header + '\n': a multiple of 64
+    let unpadded = 10 + header.len() + 1;
+    header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
+    header.push('\n');
+    let len = u16::try_from(header.len()).map_err(|_| bad("npy array", "shape too long"))?;
+    let mut out = Vec::with_capacity(10 + header.len() + 8 * n);
+    out.extend_from_slice(b"\x93NUMPY\x01\x00");
+    out.extend_from_slice(&len.to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    for v in &array.data {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    Ok(out)
+}
+
+/// Writes `array` as a `.npy` file ([`npy_bytes`]); [`FrfError::Io`] naming the file when
+/// it cannot be written.
+pub fn write_npy(path: impl AsRef<Path>, array: &NpyArray) -> Result<(), FrfError> {
+    let path = path.as_ref();
+    std::fs::write(path, npy_bytes(array)?).map_err(|e| FrfError::Io {
+        file: path.display().to_string(),
+        message: e.to_string(),
+    })
+}
+
 /// Parses one `.npy` file's bytes.
 pub fn parse_npy(bytes: &[u8], name: &str) -> Result<NpyArray, FrfError> {
     if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
@@ -386,5 +435,26 @@ mod tests {
         cplx[at + 1] = b'c';
         let e = parse_npy(&cplx, "c.npy").unwrap_err().to_string();
         assert!(e.contains("c.npy") && e.contains("not supported"), "{e}");
+    }
+
+    #[test]
+    fn written_arrays_read_back() {
+        for shape in [vec![5], vec![3, 2], vec![4, 3, 2, 2]] {
+            let n: usize = shape.iter().product();
+            let a = NpyArray {
+                shape: shape.clone(),
+                data: (0..n).map(|k| k as f64 * 0.5 - 1.0).collect(),
+            };
+            let bytes = super::npy_bytes(&a).unwrap();
+            // the data start at a multiple of 64 bytes
+            let hlen = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+            assert_eq!((10 + hlen) % 64, 0);
+            assert_eq!(parse_npy(&bytes, "t.npy").unwrap(), a);
+        }
+        let bad = NpyArray {
+            shape: vec![2, 2],
+            data: vec![1.0],
+        };
+        assert!(super::npy_bytes(&bad).is_err());
     }
 }

@@ -36,6 +36,52 @@ pub enum Target {
     /// A random modal plant of any size (rank-one modes, optional rigid body, close
     /// pairs), its exact FRF and a noisy measurement with its variance.
     RandomModal(RandomArgs),
+    /// A piezo-actuated 3 x 3 mechanism (static gain, modes at 635-2770 Hz, one sample
+    /// of delay at 6400 Hz) measured in open loop with orthogonal multisines and a
+    /// stochastic nonlinear contribution: the nonparametric estimate (total and noise
+    /// variance), and on request the time records and test records as NumPy arrays.
+    Piezo(PiezoArgs),
+}
+
+/// Arguments of `frfit simulate piezo`.
+#[derive(ClapArgs, Debug)]
+pub struct PiezoArgs {
+    /// Seed of the plant (mode shapes, static gain), the phases and the noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Measured periods per realization.
+    #[arg(long, default_value_t = 2)]
+    pub periods: usize,
+    /// Realizations (3 orthogonal experiments each).
+    #[arg(long, default_value_t = 2)]
+    pub realizations: usize,
+    /// Stochastic nonlinear contribution, relative standard deviation per entry and line
+    /// (new in each realization, the same over its periods).
+    #[arg(long, default_value_t = 0.03, value_name = "REL")]
+    pub distortion: f64,
+    /// White output noise, RMS per sample.
+    #[arg(long, default_value_t = 4e-3)]
+    pub noise: f64,
+    /// Samples per period (6400 Hz sampling).
+    #[arg(long, default_value_t = 8192)]
+    pub period: usize,
+    /// Every bin up to this frequency is excited, Hz.
+    #[arg(long, default_value_t = 3000.0)]
+    pub f_max: f64,
+    /// Output FRF CSV (`_var` the total variance, `_var_noise` its noise part).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write the exact noiseless response (the best linear approximation).
+    #[arg(long)]
+    pub noiseless: Option<PathBuf>,
+    /// Also write the time records the estimate came from, as DIR/u.npy and DIR/y.npy
+    /// (samples x channels x experiments x periods; experiments in realizations of 3).
+    #[arg(long, value_name = "DIR")]
+    pub records: Option<PathBuf>,
+    /// Also write test records of the same plant (one new realization: new phases,
+    /// noise and distortion) as DIR/u.npy and DIR/y.npy, for `frfit predict`.
+    #[arg(long, value_name = "DIR")]
+    pub test_records: Option<PathBuf>,
 }
 
 /// Arguments of `frfit simulate random-modal`.
@@ -181,7 +227,126 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     match args.target {
         Target::WaferStage(a) => run_wafer(a, quiet),
         Target::RandomModal(a) => run_random(a, quiet),
+        Target::Piezo(a) => run_piezo(a, quiet),
     }
+}
+
+/// Writes the time records of `spectra` (every realization's experiments in order) as
+/// `dir/u.npy` and `dir/y.npy`, shaped `(samples of a period, channels, experiments,
+/// periods)` in C order, the layout `frfit nonparametric` and `frfit predict` read.
+fn write_time_records(
+    dir: &std::path::Path,
+    spectra: &experiment::nonparametric::PeriodicSpectra,
+    period: usize,
+    periods: usize,
+) -> Result<(), FrfitError> {
+    std::fs::create_dir_all(dir).map_err(|e| FrfitError::io(dir, e))?;
+    let records: Vec<&experiment::nonparametric::TimeRecords> = spectra
+        .realizations
+        .iter()
+        .map(|r| {
+            r.time.as_ref().ok_or_else(|| FrfitError::Fit {
+                what: "time records".into(),
+                why: "the simulation kept no time records".into(),
+            })
+        })
+        .collect::<Result<_, _>>()?;
+    let write =
+        |name: &str,
+         pick: &dyn Fn(&experiment::nonparametric::TimeRecords) -> &Vec<Vec<Vec<f64>>>| {
+            let per_exp: Vec<&Vec<Vec<f64>>> =
+                records.iter().flat_map(|r| pick(r).iter()).collect();
+            let ne = per_exp.len();
+            let nch = per_exp.first().map_or(0, |e| e.len());
+            let mut data = vec![0.0; period * nch * ne * periods];
+            for (e, chans) in per_exp.iter().enumerate() {
+                for (c, x) in chans.iter().enumerate() {
+                    for p in 0..periods {
+                        for t in 0..period {
+                            data[((t * nch + c) * ne + e) * periods + p] = x[p * period + t];
+                        }
+                    }
+                }
+            }
+            let a = frf_data::io::npy::NpyArray {
+                shape: vec![period, nch, ne, periods],
+                data,
+            };
+            frf_data::io::npy::write_npy(dir.join(name), &a)
+        };
+    write("u.npy", &|r| &r.input)?;
+    write("y.npy", &|r| &r.output)?;
+    Ok(())
+}
+
+fn run_piezo(a: PiezoArgs, quiet: bool) -> Result<(), FrfitError> {
+    use experiment::synth::{piezo_experiment, PiezoConfig};
+    let t0 = Instant::now();
+    let cfg = PiezoConfig {
+        seed: a.seed,
+        fs: 6400.0,
+        period: a.period,
+        f_max_hz: a.f_max,
+        periods: a.periods,
+        realizations: a.realizations,
+        distortion: a.distortion,
+        noise_rms: a.noise,
+        keep_time_signals: a.records.is_some(),
+        ..PiezoConfig::default()
+    };
+    let exp = piezo_experiment(&cfg)?;
+    let spectra = exp.run(SimulationPath::TimeDomain)?;
+    let est = experiment::nonparametric::estimate(&spectra, &EstimatorConfig::default())?;
+    let comments = vec![
+        format!("synthetic piezo-actuated 3 x 3 mechanism, seed {}", a.seed),
+        format!(
+            "open loop, orthogonal random-phase multisines, every line to {} Hz; sampling {} Hz with one sample of computation delay and a zero-order hold",
+            a.f_max, cfg.fs
+        ),
+        format!(
+            "periods={} realizations={} experiments={}",
+            est.periods, est.realizations, est.n_experiments
+        ),
+        format!(
+            "stochastic nonlinear contribution: relative std {} per entry and line, new in each realization",
+            a.distortion
+        ),
+    ];
+    frf_data::io::write_frf_csv(&a.out, &est.frf, &comments)?;
+    if let Some(p) = &a.noiseless {
+        frf_data::io::write_frf_csv(
+            p,
+            &exp.true_frf()?,
+            &[format!(
+                "synthetic piezo mechanism, seed {}: exact noiseless response (the best linear approximation)",
+                a.seed
+            )],
+        )?;
+    }
+    if let Some(dir) = &a.records {
+        write_time_records(dir, &spectra, a.period, a.periods)?;
+    }
+    if let Some(dir) = &a.test_records {
+        let test = piezo_experiment(&PiezoConfig {
+            realizations: 1,
+            phase_seed: Some(a.seed.wrapping_add(1_000_003)),
+            keep_time_signals: true,
+            ..cfg.clone()
+        })?;
+        let spectra = test.run(SimulationPath::TimeDomain)?;
+        write_time_records(dir, &spectra, a.period, a.periods)?;
+    }
+    if !quiet {
+        eprintln!(
+            "wrote {} ({} lines, {} periods x {} realizations) in {:.1} s",
+            a.out.display(),
+            est.frf.n_lines(),
+            est.periods,
+            est.realizations,
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
 }
 
 /// Writes a truth JSON file (the schema of the reference data's `*.truth.json`).
