@@ -73,6 +73,9 @@ pub struct FitContext {
     /// How the variance was pooled over neighbouring lines
     /// ([`super::pooled_variance`]), when its declared degrees of freedom were few.
     pub pooled: Option<super::pooled_variance::Pooled>,
+    /// The test of the nonlinear part of the variance (total against noise,
+    /// [`super::nonlinear`]), when the data carry both and state their realizations.
+    pub nonlinear: Option<super::nonlinear::NonlinearTest>,
 }
 
 impl FitContext {
@@ -109,6 +112,7 @@ impl FitContext {
         let fs_hz = cfg.fs_hz.or(decl.fs_hz);
         // a variance of few degrees of freedom per line, pooled over neighbouring lines
         // before it weighs and tests anything
+        let nonlinear = super::nonlinear::test_nonlinear(&band, &decl, cfg.alpha);
         let (band, pooled) = super::pooled_variance::pool_variance(band, &decl)?;
         let noise = noise_level(&band).map_err(err("noise level"))?;
         // the floor and the local floor as a noise level share one computation of the
@@ -218,6 +222,7 @@ impl FitContext {
             omega,
             variance_dof,
             pooled,
+            nonlinear,
         })
     }
 

@@ -19,6 +19,7 @@
 mod context;
 mod first_fit;
 mod from_fit;
+pub mod nonlinear;
 pub mod pooled_variance;
 mod summarize;
 

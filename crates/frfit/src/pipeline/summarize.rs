@@ -197,7 +197,25 @@ fn verdict(
     floor_analysis: Option<&ResidualAnalysis>,
     distortion: Option<&DistortionSummary>,
     final_errors: &ErrorStats,
+    nonlinear: Option<&super::nonlinear::NonlinearTest>,
 ) -> (&'static str, String) {
+    match nonlinear {
+        // the residual at the level of a total variance whose nonlinear part is
+        // significant: the model is at what a linear model can reach
+        Some(t) if !analysis.significant && t.significant => {
+            return (
+                "nonlinear_distortion",
+                format!(
+                    "the residual is at the level of the total variance (noise and stochastic nonlinear distortion over the realizations): residual-to-noise ratio {:.3} (excess {:.3} of the calibrated energy, p = {:.2e}); {}. No linear model gets closer; more realizations measure the distortion more precisely but do not remove it",
+                    final_errors.residual_to_noise,
+                    analysis.significance.excess_ratio,
+                    analysis.significance.p_value,
+                    t.describe()
+                ),
+            );
+        }
+        _ => {}
+    }
     if !analysis.significant {
         return (
             "noise_limited",
@@ -369,6 +387,7 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
             run.floor_analysis,
             run.distortion.as_ref(),
             &run.final_errors,
+            ctx.nonlinear.as_ref(),
         ),
         None => (
             super::NOT_ANALYSED,
