@@ -28,6 +28,7 @@ pub mod frf;
 pub mod io;
 pub mod model;
 pub mod shared_data;
+pub mod stats;
 pub mod truth;
 pub mod view;
 pub mod weighting;

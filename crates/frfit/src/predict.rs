@@ -60,6 +60,20 @@ pub struct Prediction {
     pub noise: Vec<Vec<f64>>,
 }
 
+/// [`predict`] with the response of `model` at the lines of `spectra`.
+pub fn predict_model(
+    model: &additive_riv::AdditiveModel,
+    spectra: &PeriodicSpectra,
+) -> Result<Prediction, FrfitError> {
+    use frf_data::ModelStructure;
+    let omega: Vec<f64> = spectra
+        .freq_hz
+        .iter()
+        .map(|f| f * std::f64::consts::TAU)
+        .collect();
+    predict(&model.response_at(&omega), spectra)
+}
+
 /// Predicts the outputs of the test records `spectra` with the model response `g` at
 /// their lines (`g` in the layout of [`ResponseGrid`], one matrix per line of
 /// `spectra.freq_hz`) and compares them with the measured outputs.

@@ -4,7 +4,8 @@
 //! contribution of 3 % of `|P|`, 10 to 15 times the noise) and separate test records;
 //! `frfit nonparametric` groups the experiments into realizations and splits the total
 //! variance from its noise part; `frfit fit` and `frfit diagnose` fit the estimate;
-//! `frfit predict` predicts the test records with each model.
+//! `frfit predict` predicts the test records with each model, and `diagnose
+//! --test-records` reports the initial and the final model's prediction of them.
 //!
 //! What must hold: the estimate's comments state the periods, the realizations and the
 //! sample rate; the diagnosis names the delay, the static gain (a feedthrough) and the
@@ -69,7 +70,32 @@ fn time_records_to_a_diagnosed_model_that_predicts_test_records() {
     );
 
     ok(&["fit", &p("est.csv"), "--out", &p("fit.json")]);
-    ok(&["diagnose", &p("est.csv"), "--report", &p("dia")]);
+    ok(&[
+        "diagnose",
+        &p("est.csv"),
+        "--report",
+        &p("dia"),
+        "--test-records",
+        &p("test/u.npy"),
+        &p("test/y.npy"),
+    ]);
+    // the initial and the final model on the test records, in the report
+    let report = std::fs::read_to_string(dir.join("dia/report.md")).unwrap();
+    assert!(
+        report.contains("## Prediction of test records"),
+        "no section"
+    );
+    let (initial, last) = (
+        nrmse(&dir.join("dia/test_records/initial/prediction.json")),
+        nrmse(&dir.join("dia/test_records/final/prediction.json")),
+    );
+    println!("diagnose --test-records: initial {initial:.4?}, final {last:.4?}");
+    for (a, b) in initial.iter().zip(&last) {
+        assert!(
+            b < a,
+            "the final model predicts worse than the initial one: {b} > {a}"
+        );
+    }
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("dia/summary.json")).unwrap())
             .unwrap();

@@ -29,6 +29,12 @@
 
 use serde::{Deserialize, Serialize};
 
+/// The workspace's one normal quantile and the approximate chi-square and F critical
+/// values of the structure tests ([`frf_data::stats`]).
+pub use frf_data::stats::{
+    chi2_upper_approx as chi2_upper, f_critical_many_dof as f_critical, normal_quantile,
+};
+
 /// Relative tolerance of the numerical rank of the projected data.
 pub const RANK_TOL: f64 = 1e-12;
 
@@ -110,63 +116,6 @@ pub fn n_params(n: usize, p: usize, m: usize) -> usize {
     n * (p + m) + p * m
 }
 
-/// Standard normal quantile (Acklam's rational approximation, absolute error below
-/// 5e-5 down to tail probabilities of 1e-10; the same approximation as the diagnosis's
-/// `additive_riv::significance::normal_quantile`).
-pub fn normal_quantile(p: f64) -> f64 {
-    let p = p.clamp(1e-300, 1.0 - 1e-16);
-    const A: [f64; 6] = [
-        -3.969683028665376e1,
-        2.209460984245205e2,
-        -2.759285104469687e2,
-        1.383_577_518_672_69e2,
-        -3.066479806614716e1,
-        2.506628277459239,
-    ];
-    const B: [f64; 5] = [
-        -5.447609879822406e1,
-        1.615858368580409e2,
-        -1.556989798598866e2,
-        6.680131188771972e1,
-        -1.328068155288572e1,
-    ];
-    const C: [f64; 6] = [
-        -7.784894002430293e-3,
-        -3.223964580411365e-1,
-        -2.400758277161838,
-        -2.549671035763305,
-        4.374664141464968,
-        2.938163982698783,
-    ];
-    const D: [f64; 4] = [
-        7.784695709041462e-3,
-        3.224671290700398e-1,
-        2.445134137142996,
-        3.754408661907416,
-    ];
-    let plow = 0.02425;
-    if p < plow {
-        let q = (-2.0 * p.ln()).sqrt();
-        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
-            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
-    } else if p <= 1.0 - plow {
-        let q = p - 0.5;
-        let r = q * q;
-        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
-            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
-    } else {
-        -normal_quantile(1.0 - p)
-    }
-}
-
-/// Upper quantile of the chi-square distribution with `dof` degrees of freedom at tail
-/// probability `alpha` (Wilson-Hilferty).
-pub fn chi2_upper(dof: f64, alpha: f64) -> f64 {
-    let z = normal_quantile(1.0 - alpha);
-    let h = 2.0 / (9.0 * dof);
-    dof * (1.0 - h + z * h.sqrt()).powi(3).max(0.0)
-}
-
 /// The F statistic of `dp` added real parameters that lower the cost `sum w |E|^2` by
 /// `dv`, with the noise scale `s2 = V / (N - P/2)` of the larger model (`N` complex
 /// residuals, `P` real parameters; each complex residual contributes 1 on average, each
@@ -176,13 +125,6 @@ pub fn f_statistic(dv: f64, dp: usize, v: f64, observations: usize, params: usiz
     let dof = (observations as f64 - params as f64 / 2.0).max(1.0);
     let s2 = (v / dof).max(f64::MIN_POSITIVE);
     (dv / (dp.max(1) as f64 / 2.0)) / s2
-}
-
-/// Critical value of [`f_statistic`] at significance `alpha` for `dp` added parameters
-/// (many residual degrees of freedom: `chi2_dp(alpha) / dp`).
-pub fn f_critical(dp: usize, alpha: f64) -> f64 {
-    let dp = dp.max(1) as f64;
-    chi2_upper(dp, alpha) / dp
 }
 
 /// Numerical rank of `sv` (descending).

@@ -229,9 +229,14 @@ impl Accumulator {
         let r = self.count;
         let min_rcond = self.config.min_rcond;
         let freq = &self.freq_hz;
-        let results: Vec<LineResult> = (0..n)
+        // the lines in parallel, the error of the lowest failing line (a parallel collect
+        // into a `Result` stops at whichever failing line a thread reaches first)
+        let per_line: Vec<Result<LineResult, _>> = (0..n)
             .into_par_iter()
             .map(|k| line_estimate(rs, k, min_rcond).map_err(|(rc, why)| (k, rc, why)))
+            .collect();
+        let results: Vec<LineResult> = per_line
+            .into_iter()
             .collect::<Result<Vec<_>, _>>()
             .map_err(|(k, rcond, why)| FrfError::SingularInput {
                 line: k,

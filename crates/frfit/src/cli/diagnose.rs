@@ -39,6 +39,24 @@ pub struct Args {
     /// Probability level of the validation's disturbance bound.
     #[arg(long, default_value_t = 0.99, requires = "validate")]
     pub alpha: f64,
+    /// Test records measured apart from the data (`.mat` time records, one file per
+    /// experiment; NumPy records, one `.npz` or `u.npy y.npy`; or a periodic spectra
+    /// `.csv`): the initial and the final model predict them, and the NRMSE per output
+    /// (as `frfit predict`) goes to DIR/test_records/ and report.md. The records' sample
+    /// rate is `--fs`, else the one the data declare (`frfit nonparametric` writes it),
+    /// else the .mat file's.
+    #[arg(long, num_args = 1.., value_name = "FILE")]
+    pub test_records: Vec<PathBuf>,
+    /// Input signal names of the test records (as `frfit predict --input`).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub test_input: Vec<String>,
+    /// Output signal names of the test records (as `frfit predict --output`).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub test_output: Vec<String>,
+    /// Samples per period of the test records (NumPy records with a periods axis: the
+    /// first axis's length).
+    #[arg(long)]
+    pub test_period: Option<usize>,
 }
 
 /// Runs `frfit diagnose`.
@@ -87,6 +105,11 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     )?;
     if let Some(vdata) = &args.validate {
         validate_final_model(&args, vdata, &model_path, quiet)?;
+    }
+    if !args.test_records.is_empty() {
+        // the records' sample rate: --fs, else the one the data declare
+        let fs = args.fs.or(frfit::declared::declared(&data).fs_hz);
+        predict_test_records(&args, fs, &out, quiet)?;
     }
     if !quiet {
         print_fit(&out);
@@ -156,6 +179,84 @@ fn validate_final_model(
             v.gamma_max,
             v.gamma_median
         );
+    }
+    Ok(())
+}
+
+/// `--test-records`: the initial and the final model predict the test records
+/// (DIR/test_records/initial/ and final/), and a section of report.md compares them.
+fn predict_test_records(
+    args: &Args,
+    fs: Option<f64>,
+    out: &pipeline::PipelineOutput,
+    quiet: bool,
+) -> Result<(), FrfitError> {
+    use frfit::nonparametric::{spectra_from_files, RecordSpec};
+    use frfit::predict::predict_model;
+    let spec = RecordSpec {
+        inputs: args.test_input.clone(),
+        outputs: args.test_output.clone(),
+        fs,
+        period: args.test_period,
+        // every record is compared on its own
+        realizations: Some(1),
+        ..RecordSpec::default()
+    };
+    let (spectra, _) = spectra_from_files(&args.test_records, &spec)?;
+    let dir = args.report.join("test_records");
+    let initial = predict_model(&out.initial_model, &spectra)?;
+    let last = predict_model(&out.fit.model, &spectra)?;
+    let names: Vec<String> = args
+        .test_records
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
+    initial.write(
+        &dir.join("initial"),
+        &format!("initial model on the test records {}", names.join(", ")),
+    )?;
+    last.write(
+        &dir.join("final"),
+        &format!("final model on the test records {}", names.join(", ")),
+    )?;
+    let md_path = args.report.join("report.md");
+    let mut md = std::fs::read_to_string(&md_path).map_err(|e| FrfitError::io(&md_path, e))?;
+    md.push_str(&format!(
+        "\n## Prediction of test records\n\n\
+         The initial and the final model predict the periodic steady state of `{}` ({} record(s), \
+         {} periods, {} excited lines): NRMSE per output over the excited lines, and the records' \
+         own noise floor (the spread over periods).\n\n\
+         | output | initial NRMSE | final NRMSE | noise floor |\n|---|---|---|---|\n",
+        names.join("`, `"),
+        last.records,
+        last.periods,
+        last.freq_hz.len()
+    ));
+    for (i, (a, b)) in initial.outputs.iter().zip(&last.outputs).enumerate() {
+        md.push_str(&format!(
+            "| {} | {:.4e} | {:.4e} | {} |\n",
+            i + 1,
+            a.nrmse,
+            b.nrmse,
+            b.noise_floor
+                .map_or_else(|| "(one period)".to_string(), |f| format!("{f:.4e}"))
+        ));
+    }
+    md.push_str(
+        "\n![final model: measured, predicted and error spectra](test_records/final/prediction.svg)\n",
+    );
+    std::fs::write(&md_path, md).map_err(|e| FrfitError::io(&md_path, e))?;
+    if !quiet {
+        for (i, (a, b)) in initial.outputs.iter().zip(&last.outputs).enumerate() {
+            println!(
+                "test records, output {}: NRMSE initial {:.4e}, final {:.4e}{}",
+                i + 1,
+                a.nrmse,
+                b.nrmse,
+                b.noise_floor
+                    .map_or_else(String::new, |f| format!(" (noise floor {f:.4e})"))
+            );
+        }
     }
     Ok(())
 }

@@ -185,6 +185,9 @@ pub struct PipelineOutput {
     cmif: std::sync::OnceLock<std::sync::Arc<Cmif>>,
     /// The picked peaks the fit started from.
     pub peaks: Vec<CmifPeak>,
+    /// The model before the diagnosis loop (the first fit, or `fit`'s model when the
+    /// diagnosis started again from it); the final model without the loop.
+    pub initial_model: AdditiveModel,
     /// Response of the model before the diagnosis loop.
     pub initial_response: ResponseGrid,
     /// Response of the final model.
@@ -528,6 +531,7 @@ pub fn run(
         noise,
         cmif,
         peaks,
+        initial_model,
         initial_response,
         final_response,
         step_responses,

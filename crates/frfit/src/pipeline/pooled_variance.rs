@@ -54,12 +54,13 @@ impl Pooled {
 }
 
 /// Real degrees of freedom of the data's per-line variance from what they declare:
-/// `2 (R - 1)` with `R >= 2` realizations, `2 (P - 1)` with one realization (or none
-/// stated) of `P >= 2` periods; `None` when neither is stated.
+/// `2 (R - 1)` with `R >= 2` realizations, `2 (P - 1)` with one realization of `P >= 2`
+/// periods; `None` when the realizations are not stated (the periods alone do not say
+/// what the variance was estimated over).
 pub fn variance_dof_per_line(decl: &Declared) -> Option<f64> {
     match (decl.realizations, decl.periods) {
         (Some(r), _) if r >= 2 => Some(2.0 * (r as f64 - 1.0)),
-        (Some(1) | None, Some(p)) if p >= 2 => Some(2.0 * (p as f64 - 1.0)),
+        (Some(1), Some(p)) if p >= 2 => Some(2.0 * (p as f64 - 1.0)),
         _ => None,
     }
 }
@@ -139,7 +140,7 @@ mod tests {
         assert_eq!(variance_dof_per_line(&d(Some(2), Some(2))), Some(2.0));
         assert_eq!(variance_dof_per_line(&d(Some(10), Some(10))), Some(18.0));
         assert_eq!(variance_dof_per_line(&d(Some(1), Some(19))), Some(36.0));
-        assert_eq!(variance_dof_per_line(&d(None, Some(2))), Some(2.0));
+        assert_eq!(variance_dof_per_line(&d(None, Some(2))), None);
         assert_eq!(variance_dof_per_line(&d(None, None)), None);
     }
 
