@@ -307,6 +307,13 @@ impl Step {
     fn superseded_by(&self) -> Option<usize> {
         self.s.superseded_by
     }
+    /// The step's weighted cost on interleaved held-out lines, `(before, after)`: the
+    /// model without and with it, each refitted on the even lines and tested on the odd
+    /// ones and the reverse (the round's best trial only; `None` otherwise).
+    #[getter]
+    fn held_out(&self) -> Option<(f64, f64)> {
+        self.s.held_out.map(|h| (h.before, h.after))
+    }
     fn __repr__(&self) -> String {
         format!(
             "Step({}, {}, F={:.3e} (crit {:.3}), median rel {:.3e} -> {:.3e})",

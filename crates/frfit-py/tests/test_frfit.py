@@ -326,6 +326,9 @@ def test_diagnose_starts_where_fit_ends_on_complex_mode_shapes():
     # model (issues 41, 42), which `fit` reaches through its SK second start
     assert d.initial_errors.median_rel <= 1.02 * rel_err(fitted.response(FREQ), data.G)
     assert rel_err(d.model.response(FREQ), g0) < 1e-4
+    assert "from_fit" in d.summary["initial"], d.summary["initial"].keys()
+    for step in d.steps:
+        assert step.held_out is None or len(step.held_out) == 2
 
 
 def test_the_simulator_truth_is_recovered_and_the_example_runs():

@@ -126,6 +126,7 @@ class Step:
     before: ErrorStats
     after: ErrorStats
     superseded_by: Optional[int]
+    held_out: Optional[Tuple[float, float]]
 
 class Diagnosis:
     model: Model
