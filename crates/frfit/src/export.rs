@@ -116,6 +116,30 @@ pub struct StateSpaceExport {
     pub units: Option<String>,
     /// The relative rank tolerance of the residues (0: working precision).
     pub rank_tol: f64,
+    /// The flexible modes with their standard deviations when the model file holds them
+    /// (from the refiner's covariance, `--refine ml`), so that a robust controller
+    /// design reads the modal parameters' uncertainty beside the matrices; empty when
+    /// the export did not come from a model file.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub modes: Vec<ExportedMode>,
+    /// Standard deviation of the fitted delay, seconds, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_s_std: Option<f64>,
+}
+
+/// A flexible mode of the exported model and its standard deviations.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ExportedMode {
+    /// Natural frequency, Hz.
+    pub f_hz: f64,
+    /// Relative damping.
+    pub zeta: f64,
+    /// Standard deviation of `f_hz`, Hz, when the refiner computed a covariance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub f_hz_std: Option<f64>,
+    /// Standard deviation of `zeta`, likewise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zeta_std: Option<f64>,
 }
 
 /// The state space of `model` (see the module documentation); `discrete_fs_hz` asks for
@@ -212,6 +236,8 @@ pub fn export_state_space(
         },
         units,
         rank_tol,
+        modes: Vec::new(),
+        delay_s_std: None,
     })
 }
 
@@ -259,6 +285,29 @@ pub fn mat_bytes(e: &StateSpaceExport) -> Vec<u8> {
     if let Some(x) = &e.factors.crosstalk {
         let (v, dims) = column_major(x, ny, nu);
         store.push(("X".into(), v, dims));
+    }
+    // the modal parameters and their standard deviations (NaN where unknown)
+    if !e.modes.is_empty() {
+        let col =
+            |f: &dyn Fn(&ExportedMode) -> f64| -> Vec<f64> { e.modes.iter().map(f).collect() };
+        let k = e.modes.len();
+        store.push(("f_hz".into(), col(&|m| m.f_hz), [k, 1]));
+        store.push(("zeta".into(), col(&|m| m.zeta), [k, 1]));
+        if e.modes.iter().any(|m| m.f_hz_std.is_some()) {
+            store.push((
+                "f_hz_std".into(),
+                col(&|m| m.f_hz_std.unwrap_or(f64::NAN)),
+                [k, 1],
+            ));
+            store.push((
+                "zeta_std".into(),
+                col(&|m| m.zeta_std.unwrap_or(f64::NAN)),
+                [k, 1],
+            ));
+        }
+    }
+    if let Some(sd) = e.delay_s_std {
+        store.push(("delay_s_std".into(), vec![sd], [1, 1]));
     }
     store.push((
         "n_dynamics_factors".into(),

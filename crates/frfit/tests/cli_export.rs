@@ -229,3 +229,36 @@ fn wafer_export_equals_eval() {
     assert!(e.discrete.is_some(), "hold {}", e.factors.hold);
     assert!(err < 1e-9, "export vs eval: {err:.3e}");
 }
+
+/// Issue 44: the modes and their standard deviations go with the export. An ML fit
+/// (which computes the covariance) exports `modes` with finite positive `f_hz_std` and
+/// `zeta_std` in the JSON and `f_hz_std`, `zeta_std` in the `.mat`; a refined-IV fit
+/// exports the modes without them.
+#[test]
+fn the_modes_and_their_standard_deviations_go_with_the_export() {
+    let dir = temp_dir("export-std");
+    let csv = write_plant(&dir, 2e-4);
+    let (e, _) = fit_export_eval(&csv, &dir, &["--delay", "auto", "--refine", "ml"]);
+    assert_eq!(e.modes.len(), common::MODES_HZ.len(), "{:?}", e.modes);
+    for m in &e.modes {
+        let (sf, sz) = (m.f_hz_std.unwrap(), m.zeta_std.unwrap());
+        assert!(sf.is_finite() && sf > 0.0 && sf < 0.01 * m.f_hz, "{m:?}");
+        assert!(sz.is_finite() && sz > 0.0, "{m:?}");
+    }
+    let mat = dir.join("ss.mat");
+    let o = run(&[
+        "export",
+        dir.join("m.json").to_str().unwrap(),
+        "--out",
+        mat.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let vars = frf_data::io::mat5::parse_mat5(&std::fs::read(&mat).unwrap(), "ss.mat").unwrap();
+    for name in ["f_hz", "zeta", "f_hz_std", "zeta_std"] {
+        assert!(vars.iter().any(|v| v.name == name), "{name} missing");
+    }
+    let (e, _) = fit_export_eval(&csv, &dir, &["--delay", "auto"]);
+    assert_eq!(e.modes.len(), common::MODES_HZ.len());
+    assert!(e.modes.iter().all(|m| m.f_hz_std.is_none()));
+}

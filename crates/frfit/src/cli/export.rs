@@ -15,8 +15,10 @@ use std::path::PathBuf;
 pub struct Args {
     /// The model (JSON written by `frfit fit` or `frfit diagnose`).
     pub model: PathBuf,
-    /// Output: `.json` (frfit-state-space, every factor) or `.mat` (MATLAB level 5:
-    /// A, B, C, D, delay_s, derivative_order; Ad, Bd, Cd, Dd, Ts with a discrete form).
+    /// Output: `.json` (frfit-state-space, every factor, the modes with their standard
+    /// deviations) or `.mat` (MATLAB level 5: A, B, C, D, delay_s, derivative_order;
+    /// Ad, Bd, Cd, Dd, Ts with a discrete form; f_hz, zeta, and f_hz_std, zeta_std,
+    /// delay_s_std when the model holds them).
     #[arg(long, value_name = "SS.json|SS.mat")]
     pub out: PathBuf,
     /// Also write the exact zero-order-hold equivalent at this sample rate, Hz (a model
@@ -42,7 +44,19 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         .map_err(|e| bad_model(&e))?
         .to_frf_model()
         .map_err(|e| bad_model(&e))?;
-    let e = export_state_space(&model, args.discrete, args.rank_tol, file.units.clone())?;
+    let mut e = export_state_space(&model, args.discrete, args.rank_tol, file.units.clone())?;
+    // the modal parameters with the standard deviations the model file holds (issue 44)
+    e.modes = file
+        .modes
+        .iter()
+        .map(|m| frfit::export::ExportedMode {
+            f_hz: m.f_hz,
+            zeta: m.zeta,
+            f_hz_std: m.f_hz_std,
+            zeta_std: m.zeta_std,
+        })
+        .collect();
+    e.delay_s_std = file.delay_s_std;
     let ext = args
         .out
         .extension()
