@@ -147,14 +147,7 @@ fn second_start(
     };
     let mut run_first = run_of(&first);
     let fpe_first = run_first.fpe.unwrap_or(f64::INFINITY);
-    let second_fc = additive_riv::FitterConfig {
-        delay,
-        ..if quiet {
-            ctx.quiet_fitter_config(&second_cfg)
-        } else {
-            ctx.fitter_config(&second_cfg)
-        }
-    };
+    let second_fc = start_fitter_config(ctx, &second_cfg, delay, quiet);
     let second = match chain_fit(ctx, &second_cfg, &second_fc) {
         Ok(s) => s,
         Err(e) => {
@@ -182,6 +175,22 @@ fn second_start(
     kept.fit.messages.push(note);
     kept.chain_runs = runs;
     Ok(third_start(ctx, cfg, kept, delay, quiet))
+}
+
+/// The fitter settings of a further start of `cfg`'s chain: the delay handling of the
+/// first chain (`delay`), quiet (no progress) with `quiet`.
+fn start_fitter_config(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    delay: additive_riv::DelayChoice,
+    quiet: bool,
+) -> additive_riv::FitterConfig {
+    let fc = if quiet {
+        ctx.quiet_fitter_config(cfg)
+    } else {
+        ctx.fitter_config(cfg)
+    };
+    additive_riv::FitterConfig { delay, ..fc }
 }
 
 /// The chain's record (cost, parameters, final prediction error) of a fit, unkept.
@@ -226,14 +235,7 @@ fn third_start(
         refine: refine.to_string(),
         ..cfg.clone()
     };
-    let fc = additive_riv::FitterConfig {
-        delay,
-        ..if quiet {
-            ctx.quiet_fitter_config(&third_cfg)
-        } else {
-            ctx.fitter_config(&third_cfg)
-        }
-    };
+    let fc = start_fitter_config(ctx, &third_cfg, delay, quiet);
     let fd = &ctx.fit_data;
     let mut kept = kept;
     let why = kept.fit.convergence.describe();
