@@ -6,12 +6,12 @@
 //! nonlinear contribution (3 % of `|P|`) well above the noise. The nonparametric
 //! estimate carries the total variance (`_var`) and its noise part.
 //!
-//! `frfit fit` must end with every pole stable, near the best linear approximation (the
-//! plant); `frfit diagnose` must end no worse on the data than `fit`. That the fit also
-//! ends *converged* on every seed is a known failure
-//! (`known_failure_the_piezo_like_fit_converges`): the refined-IV iterations of both
-//! starts stop where no step along their direction lowers the weighted cost; the third
-//! start (`sk -> ml`) converges on seed 1 and fails on seed 2.
+//! `frfit fit` must end converged with every pole stable, near the best linear
+//! approximation (the plant), in seconds; `frfit diagnose` must end no worse on the data
+//! than `fit`. No hold is declared here (the estimate states the sample rate, as `frfit
+//! nonparametric` does): the refined-IV iterations of both starts stop where no step
+//! along their direction lowers the weighted cost, and the third start converges (`sk ->
+//! ml` on seed 1, `subspace -> ml` on seed 2).
 
 use experiment::nonparametric::EstimatorConfig;
 use experiment::synth::{piezo_experiment, PiezoConfig, SimulationPath};
@@ -61,20 +61,8 @@ fn median_rel(resp: &realize::ResponseGrid, truth: &Frf) -> f64 {
 }
 
 #[test]
-#[ignore = "known failure (issue 41): seed 1 converges through the third start (sk -> ml, 4.2e-3 from the plant); on seed 2 the sk -> ml chain fails (an unidentifiable mode at 66 MHz from the SK start) and the refined-IV fit stays FAILED (no step along its direction lowers the cost); run with --ignored"]
-fn known_failure_the_piezo_like_fit_converges() {
-    for seed in [1, 2] {
-        let (data, _, _) = piezo_data(seed);
-        let fit = run(&data, "piezo", &PipelineConfig::default(), "fit").unwrap();
-        let c = fit.summary.final_model.convergence.to_ascii_lowercase();
-        println!("seed {seed}: {c}");
-        assert!(!c.contains("not converged") && !c.contains("failed"), "{c}");
-    }
-}
-
-#[test]
-#[ignore = "slow tier (about 22 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
-fn the_piezo_like_case_fits_stable_near_the_plant_and_diagnose_is_no_worse() {
+#[ignore = "slow tier (about 35 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
+fn the_piezo_like_case_fits_converged_stable_near_the_plant_and_diagnose_is_no_worse() {
     for seed in [1, 2] {
         let (data, truth, ratio) = piezo_data(seed);
         println!(
@@ -125,6 +113,8 @@ fn the_piezo_like_case_fits_stable_near_the_plant_and_diagnose_is_no_worse() {
                 .map(|s| s.effect.as_str())
                 .collect::<Vec<_>>()
         );
+        let c = fm.convergence.to_ascii_lowercase();
+        assert!(!c.contains("not converged") && !c.contains("failed"), "{c}");
         assert_eq!(unstable, 0, "every pole stable");
         assert!(
             med < 0.02,
