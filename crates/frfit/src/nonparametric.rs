@@ -219,7 +219,7 @@ pub fn records_from_array(
             format!("the array holds {} values", data.len()),
         ));
     }
-    let idx = |t: usize, c: usize, e: usize, p: usize| ((t * nc + c) * ne + e) * np + p;
+    let idx = |t, c, e, p| record_index([ns, nc, ne, np], t, c, e, p);
     let exps = (0..ne)
         .map(|e| {
             (0..nc)
@@ -233,6 +233,50 @@ pub fn records_from_array(
         })
         .collect();
     Ok((exps, (shape.len() == 4).then_some(ns)))
+}
+
+/// The position of sample `t` of channel `c`, experiment `e`, period `p` in a C-order
+/// array shaped `[n_samples, channels, experiments, periods]` (the layout of
+/// [`records_from_array`] and [`array_from_records`]).
+fn record_index(shape: [usize; 4], t: usize, c: usize, e: usize, p: usize) -> usize {
+    let [_, nc, ne, np] = shape;
+    ((t * nc + c) * ne + e) * np + p
+}
+
+/// The inverse of [`records_from_array`]: `experiments` (per experiment, per channel,
+/// `periods` periods of `period` samples each, concatenated) as a C-order array shaped
+/// `[period, channels, experiments, periods]`; the shape and the values. Every
+/// experiment must have the channels of the first and `period * periods` samples per
+/// channel.
+pub fn array_from_records(
+    experiments: &[&[Vec<f64>]],
+    period: usize,
+    periods: usize,
+) -> Result<(Vec<usize>, Vec<f64>), FrfitError> {
+    let ne = experiments.len();
+    let nc = experiments.first().map_or(0, |e| e.len());
+    let shape = [period, nc, ne, periods];
+    let mut data = vec![0.0; period * nc * ne * periods];
+    for (e, chans) in experiments.iter().enumerate() {
+        if chans.len() != nc || chans.iter().any(|x| x.len() != period * periods) {
+            return Err(FrfitError::argument(
+                "records",
+                format!("experiment {e}"),
+                format!(
+                    "expected {nc} channels of {} samples ({periods} periods of {period})",
+                    period * periods
+                ),
+            ));
+        }
+        for (c, x) in chans.iter().enumerate() {
+            for p in 0..periods {
+                for t in 0..period {
+                    data[record_index(shape, t, c, e, p)] = x[p * period + t];
+                }
+            }
+        }
+    }
+    Ok((shape.to_vec(), data))
 }
 
 /// The experiments of input and output arrays of the same experiment count.
@@ -635,5 +679,28 @@ mod tests {
         let two = group_realizations(s, None).unwrap();
         assert_eq!(group_realizations(two.clone(), None).unwrap(), two);
         assert!(group_realizations(two, Some(3)).is_err());
+    }
+
+    #[test]
+    fn records_written_as_an_array_read_back() {
+        // 2 experiments, 3 channels, 2 periods of 4 samples
+        let exps: Vec<Vec<Vec<f64>>> = (0..2)
+            .map(|e| {
+                (0..3)
+                    .map(|c| (0..8).map(|t| (100 * e + 10 * c + t) as f64).collect())
+                    .collect()
+            })
+            .collect();
+        let refs: Vec<&[Vec<f64>]> = exps.iter().map(|e| e.as_slice()).collect();
+        let (shape, data) = array_from_records(&refs, 4, 2).unwrap();
+        assert_eq!(shape, vec![4, 3, 2, 2]);
+        let (back, period) = records_from_array(&shape, &data, "u").unwrap();
+        assert_eq!(back, exps);
+        assert_eq!(period, Some(4));
+        // a short channel is refused
+        let mut bad = exps.clone();
+        bad[1][2].pop();
+        let refs: Vec<&[Vec<f64>]> = bad.iter().map(|e| e.as_slice()).collect();
+        assert!(array_from_records(&refs, 4, 2).is_err());
     }
 }

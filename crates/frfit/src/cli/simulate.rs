@@ -251,29 +251,17 @@ fn write_time_records(
             })
         })
         .collect::<Result<_, _>>()?;
-    let write =
-        |name: &str,
-         pick: &dyn Fn(&experiment::nonparametric::TimeRecords) -> &Vec<Vec<Vec<f64>>>| {
-            let per_exp: Vec<&Vec<Vec<f64>>> =
-                records.iter().flat_map(|r| pick(r).iter()).collect();
-            let ne = per_exp.len();
-            let nch = per_exp.first().map_or(0, |e| e.len());
-            let mut data = vec![0.0; period * nch * ne * periods];
-            for (e, chans) in per_exp.iter().enumerate() {
-                for (c, x) in chans.iter().enumerate() {
-                    for p in 0..periods {
-                        for t in 0..period {
-                            data[((t * nch + c) * ne + e) * periods + p] = x[p * period + t];
-                        }
-                    }
-                }
-            }
-            let a = frf_data::io::npy::NpyArray {
-                shape: vec![period, nch, ne, periods],
-                data,
-            };
-            frf_data::io::npy::write_npy(dir.join(name), &a)
-        };
+    let write = |name: &str,
+                 pick: &dyn Fn(&experiment::nonparametric::TimeRecords) -> &Vec<Vec<Vec<f64>>>|
+     -> Result<(), FrfitError> {
+        let per_exp: Vec<&[Vec<f64>]> = records
+            .iter()
+            .flat_map(|r| pick(r).iter().map(|e| e.as_slice()))
+            .collect();
+        let (shape, data) = frfit::nonparametric::array_from_records(&per_exp, period, periods)?;
+        let a = frf_data::io::npy::NpyArray { shape, data };
+        Ok(frf_data::io::npy::write_npy(dir.join(name), &a)?)
+    };
     write("u.npy", &|r| &r.input)?;
     write("y.npy", &|r| &r.output)?;
     Ok(())

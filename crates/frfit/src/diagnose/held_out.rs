@@ -47,19 +47,23 @@ pub fn interleaved(fd: &FitData, parity: usize) -> FitData {
     FitData::from_parts(omega, fd.ny, fd.nu, g, w, fd.band_hz)
 }
 
-/// The held-out costs of the step from `before` to `after` on `fd` (see the module
-/// documentation), the refits by `riv`. `None` when the band has too few lines to split
-/// or a refit fails (the check is then not made).
+/// The even and the odd lines of `fd` ([`interleaved`]).
+pub fn halves(fd: &FitData) -> [FitData; 2] {
+    [interleaved(fd, 0), interleaved(fd, 1)]
+}
+
+/// The held-out costs of the step from `before` to `after` on the band split into
+/// `halves` ([`halves`]; see the module documentation), the refits by `riv`. `None` when
+/// the band has too few lines to split or a refit fails (the check is then not made).
 pub fn held_out(
-    fd: &FitData,
+    halves: &[FitData; 2],
     riv: &RivConfig,
     before: &AdditiveModel,
     after: &AdditiveModel,
 ) -> Option<HeldOut> {
-    if fd.n < 8 {
+    if halves[0].n + halves[1].n < 8 {
         return None;
     }
-    let halves = [interleaved(fd, 0), interleaved(fd, 1)];
     let jobs: Vec<(usize, bool)> = vec![(0, false), (0, true), (1, false), (1, true)];
     let costs: Vec<Option<(bool, f64)>> = jobs
         .into_par_iter()

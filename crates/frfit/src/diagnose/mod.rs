@@ -601,7 +601,7 @@ fn best_held_out(
 ) -> Option<usize> {
     loop {
         let i = accept::best(trials, current, current_cost)?;
-        let h = held_out::held_out(&ctx.fit_data, riv, current, &trials[i].model);
+        let h = held_out::held_out(ctx.held_out_halves(), riv, current, &trials[i].model);
         trials[i].held_out = h;
         match h {
             Some(h) if !h.lowers() => trials[i].hold_back(&format!(

@@ -56,6 +56,9 @@ pub struct FitContext {
     /// the report read it, a subspace start does not (at 50 x 50 entries it costs
     /// seconds and hundreds of MB).
     pub(super) cmif: OnceLock<Arc<Cmif>>,
+    /// The fit data split into their even and odd lines, made on first use
+    /// ([`held_out_halves`](Self::held_out_halves)).
+    held_out_halves: OnceLock<Arc<[FitData; 2]>>,
     /// The weighting, resolved for the band.
     pub weighting: Weighting,
     /// The band with its weights in the estimator's layout.
@@ -74,7 +77,8 @@ pub struct FitContext {
     /// ([`super::pooled_variance`]), when its declared degrees of freedom were few.
     pub pooled: Option<super::pooled_variance::Pooled>,
     /// The test of the nonlinear part of the variance (total against noise,
-    /// [`super::nonlinear`]), when the data carry both and state their realizations.
+    /// [`super::nonlinear`]), when the data carry both and state their realizations and
+    /// the final analysis runs ([`PipelineConfig::final_analysis`]).
     pub nonlinear: Option<super::nonlinear::NonlinearTest>,
 }
 
@@ -112,7 +116,12 @@ impl FitContext {
         let fs_hz = cfg.fs_hz.or(decl.fs_hz);
         // a variance of few degrees of freedom per line, pooled over neighbouring lines
         // before it weighs and tests anything
-        let nonlinear = super::nonlinear::test_nonlinear(&band, &decl, cfg.alpha);
+        // the verdict's test of the nonlinear part, on the variances as estimated (before
+        // the pooling); only the final analysis reads it
+        let nonlinear = cfg
+            .final_analysis
+            .then(|| super::nonlinear::test_nonlinear(&band, &decl, cfg.alpha))
+            .flatten();
         let (band, pooled) = super::pooled_variance::pool_variance(band, &decl)?;
         let noise = noise_level(&band).map_err(err("noise level"))?;
         // the floor and the local floor as a noise level share one computation of the
@@ -216,6 +225,7 @@ impl FitContext {
             line_floor,
             floor_noise,
             cmif: OnceLock::new(),
+            held_out_halves: OnceLock::new(),
             weighting,
             fit_data,
             delay_estimate,
@@ -230,6 +240,14 @@ impl FitContext {
     /// peaks and the report read it; a subspace start does not).
     pub fn cmif(&self) -> Result<&Arc<Cmif>, FrfitError> {
         cmif_once(&self.cmif, &self.band)
+    }
+
+    /// The fit data split into their even and their odd lines, for the diagnosis's
+    /// check of a step on held-out lines ([`crate::diagnose::held_out`]): made on the
+    /// first call and kept (a copy of the fit data, so not made per round).
+    pub fn held_out_halves(&self) -> &[FitData; 2] {
+        self.held_out_halves
+            .get_or_init(|| Arc::new(crate::diagnose::held_out::halves(&self.fit_data)))
     }
 
     /// The noise level the diagnosis loop judges residuals against: the measured (or

@@ -69,10 +69,7 @@ pub fn fit_reference(
     };
     // `frfit fit` estimates and refines the delay unless one is given
     let delay = cfg.delay.unwrap_or(additive_riv::DelayChoice::Auto);
-    let fc = additive_riv::FitterConfig {
-        delay,
-        ..ctx.quiet_fitter_config(&fit_cfg)
-    };
+    let fc = start_fitter_config(ctx, &fit_cfg, delay, true);
     Some(
         chain_fit(ctx, &fit_cfg, &fc)
             .and_then(|first| second_start(ctx, &fit_cfg, first, delay, true)),
@@ -138,14 +135,12 @@ fn second_start(
         ..cfg.clone()
     };
     let fd = &ctx.fit_data;
-    // the chain's record (cost, parameters, final prediction error) of a fit, unkept
-    let run_of = |f: &FirstFit| chain_run_of(fd, f);
     let why = if converged {
         format!("left a residual {residual_to_noise:.1} times the noise level")
     } else {
         format!("did not converge ({})", first.fit.convergence.describe())
     };
-    let mut run_first = run_of(&first);
+    let mut run_first = chain_run_of(fd, &first);
     let fpe_first = run_first.fpe.unwrap_or(f64::INFINITY);
     let second_fc = start_fitter_config(ctx, &second_cfg, delay, quiet);
     let second = match chain_fit(ctx, &second_cfg, &second_fc) {
@@ -156,10 +151,10 @@ fn second_start(
                 "second start: the {} chain {why}; the {SECOND_START} chain from the start failed ({e}), so the first chain's fit is kept",
                 first.chain.join(" -> ")
             ));
-            return Ok(first);
+            return Ok(third_start(ctx, cfg, first, delay, quiet));
         }
     };
-    let mut run_second = run_of(&second);
+    let mut run_second = chain_run_of(fd, &second);
     let fpe_second = run_second.fpe.unwrap_or(f64::INFINITY);
     let keep_second = fpe_second < fpe_first;
     run_first.kept = !keep_second;
@@ -177,8 +172,8 @@ fn second_start(
     Ok(third_start(ctx, cfg, kept, delay, quiet))
 }
 
-/// The fitter settings of a further start of `cfg`'s chain: the delay handling of the
-/// first chain (`delay`), quiet (no progress) with `quiet`.
+/// The fitter settings of `cfg`'s chain with the delay handling `delay` (that of `fit`,
+/// or of the first chain for a further start), quiet (no progress) with `quiet`.
 fn start_fitter_config(
     ctx: &FitContext,
     cfg: &PipelineConfig,

@@ -98,10 +98,9 @@ pub struct StartRecord<'a> {
     pub errors: ErrorStats,
 }
 
-/// The diagnosis from `fit`'s model that replaced one ([`FromFit::Replaced`]).
+/// What replaced a diagnosis that ended worse than `fit`'s model ([`FromFit::replaced`]):
+/// `fit`'s model as the new start.
 pub struct Replacement {
-    /// The diagnosis from `fit`'s model.
-    pub diagnosis: Diagnosis,
     /// `fit`'s first fit, the new start.
     pub reference: FirstFit,
     /// Its response at the band's lines.
@@ -113,11 +112,14 @@ pub struct Replacement {
 }
 
 /// What [`from_fit_if_worse`] decided.
-pub enum FromFit {
-    /// The diagnosis ended no worse than `fit`'s model: kept.
-    Kept(Box<Diagnosis>),
-    /// The diagnosis from `fit`'s model (or that model itself) replaced it.
-    Replaced(Box<Replacement>),
+pub struct FromFit {
+    /// The diagnosis kept: the one given, or the one from `fit`'s model.
+    pub diagnosis: Diagnosis,
+    /// The response of its final model at the band's lines (computed here, so that the
+    /// run does not compute it again).
+    pub final_response: ResponseGrid,
+    /// The new start when the diagnosis ran again from `fit`'s model.
+    pub replaced: Option<Replacement>,
 }
 
 /// Keeps `diagnosis` when its final residual is at the noise level it is judged against
@@ -130,10 +132,15 @@ pub enum FromFit {
 pub fn from_fit_if_worse(
     ctx: &FitContext,
     cfg: &PipelineConfig,
-    diagnosis: Diagnosis,
+    mut diagnosis: Diagnosis,
     start: StartRecord<'_>,
 ) -> Result<FromFit, FrfitError> {
     let final_response = diagnosis.fit.model.response_at(&ctx.omega);
+    let kept = |diagnosis, final_response| FromFit {
+        diagnosis,
+        final_response,
+        replaced: None,
+    };
     let analysis = analyze_residual(
         &ctx.band,
         &final_response,
@@ -142,19 +149,25 @@ pub fn from_fit_if_worse(
     )
     .map_err(err("residual analysis"))?;
     if !analysis.significant {
-        return Ok(FromFit::Kept(Box::new(diagnosis)));
+        return Ok(kept(diagnosis, final_response));
     }
-    let Some(Ok(reference)) = super::fit_reference(ctx, cfg) else {
-        // a given start model (the two agree), or `fit`'s chain failed where the
-        // diagnosis's did not: nothing to compare with
-        return Ok(FromFit::Kept(Box::new(diagnosis)));
+    // `None`: a given start model (the two agree)
+    let reference = match super::fit_reference(ctx, cfg) {
+        None => return Ok(kept(diagnosis, final_response)),
+        Some(Err(e)) => {
+            diagnosis.fit.messages.push(format!(
+                "the diagnosis ended above the noise level, but the model `frfit fit` gives could not be fitted to compare with ({e})"
+            ));
+            return Ok(kept(diagnosis, final_response));
+        }
+        Some(Ok(r)) => r,
     };
     let n_obs = ctx.fit_data.observations();
     let ours = Standing::of(ctx, &diagnosis.fit.model, &final_response);
     let ref_response = reference.fit.model.response_at(&ctx.omega);
     let theirs = Standing::of(ctx, &reference.fit.model, &ref_response);
     let Some(reason) = ends_worse(&ours, &theirs, n_obs) else {
-        return Ok(FromFit::Kept(Box::new(diagnosis)));
+        return Ok(kept(diagnosis, final_response));
     };
     let replaced_accepted: Vec<String> = diagnosis
         .steps
@@ -182,8 +195,8 @@ pub fn from_fit_if_worse(
     );
     let mut second = diagnose(ctx, cfg, reference.fit.clone(), &ref_response, None, None)?;
     second.fit.messages.insert(0, summary.reason.clone());
-    let second_response = second.fit.model.response_at(&ctx.omega);
-    let second_standing = Standing::of(ctx, &second.fit.model, &second_response);
+    let mut final_response = second.fit.model.response_at(&ctx.omega);
+    let second_standing = Standing::of(ctx, &second.fit.model, &final_response);
     if let Some(why) = ends_worse(&second_standing, &theirs, n_obs) {
         let mut kept = reference.fit.clone();
         kept.messages = std::mem::take(&mut second.fit.messages);
@@ -191,12 +204,16 @@ pub fn from_fit_if_worse(
             "the diagnosis from `fit`'s model ended worse than that model ({why}); `fit`'s model is the final model, and the steps accepted on the way are not in it"
         ));
         second.fit = kept;
+        final_response = ref_response.clone();
     }
-    Ok(FromFit::Replaced(Box::new(Replacement {
+    Ok(FromFit {
         diagnosis: second,
-        response: ref_response,
-        errors: theirs.errors,
-        reference,
-        summary,
-    })))
+        final_response,
+        replaced: Some(Replacement {
+            response: ref_response,
+            errors: theirs.errors,
+            reference,
+            summary,
+        }),
+    })
 }

@@ -28,7 +28,7 @@ pub use first_fit::{
     chain_fit, first_fit, fit_reference, FirstFit, SECOND_START, SECOND_START_RESIDUAL,
 };
 pub use from_fit::{ends_worse, Standing};
-use from_fit::{from_fit_if_worse, FromFit, Replacement, StartRecord};
+use from_fit::{from_fit_if_worse, FromFit, StartRecord};
 pub(crate) use summarize::error_stats;
 pub use summarize::final_model_summary;
 
@@ -346,7 +346,7 @@ pub fn run(
     };
     let FirstFit {
         fit,
-        report: fitter_report,
+        report: mut fitter_report,
         chain: mut first_chain,
         links: mut first_links,
         chain_runs: mut first_chain_runs,
@@ -390,8 +390,9 @@ pub fn run(
     let mut initial_response = initial_model.response_at(&ctx.omega);
     let mut initial_errors = error_stats(&ctx.band, &initial_response, &ctx.noise);
     timings.stage("response and errors", t);
-    let mut fitter_report = fitter_report;
     let mut from_fit = None;
+    // the final model's response, when the diagnosis computed it
+    let mut diagnosed_response = None;
     let Diagnosis {
         fit,
         steps,
@@ -406,28 +407,24 @@ pub fn run(
             model: &initial_model,
             errors: initial_errors,
         };
-        match from_fit_if_worse(&ctx, cfg, d, start)? {
-            FromFit::Kept(d) => *d,
-            FromFit::Replaced(r) => {
-                let Replacement {
-                    diagnosis,
-                    reference,
-                    response,
-                    errors,
-                    summary,
-                } = *r;
-                timings.stage("diagnose from fit's model", t);
-                initial_model = reference.fit.model;
-                initial_response = response;
-                initial_errors = errors;
-                fitter_report = reference.report;
-                first_chain = reference.chain;
-                first_links = reference.links;
-                first_chain_runs = reference.chain_runs;
-                from_fit = Some(summary);
-                diagnosis
-            }
+        let FromFit {
+            diagnosis,
+            final_response,
+            replaced,
+        } = from_fit_if_worse(&ctx, cfg, d, start)?;
+        timings.stage("diagnose: comparison with fit's model", t);
+        if let Some(r) = replaced {
+            initial_model = r.reference.fit.model;
+            initial_response = r.response;
+            initial_errors = r.errors;
+            fitter_report = r.reference.report;
+            first_chain = r.reference.chain;
+            first_links = r.reference.links;
+            first_chain_runs = r.reference.chain_runs;
+            from_fit = Some(r.summary);
         }
+        diagnosed_response = Some(final_response);
+        diagnosis
     } else {
         Diagnosis {
             fit,
@@ -440,13 +437,10 @@ pub fn run(
         timings.0.push(StageTime { stage, seconds });
     }
     let t = Instant::now();
-    // without the diagnosis loop the final model is the first fit's: its response and
-    // errors are those computed above (at 50 x 50 x 4000 lines a response costs seconds)
-    let final_response = if cfg.diagnose {
-        fit.model.response_at(&ctx.omega)
-    } else {
-        initial_response.clone()
-    };
+    // the diagnosis computed its final model's response (`from_fit_if_worse`); without
+    // the loop the final model is the first fit's: its response and errors are those
+    // computed above (at 50 x 50 x 4000 lines a response costs seconds)
+    let final_response = diagnosed_response.unwrap_or_else(|| initial_response.clone());
     // the residual analysis and the line-to-line floor read the same residual: side by
     // side on the two threads (seconds each at 50 x 50 entries)
     let analyses = || -> Result<_, FrfitError> {
