@@ -1374,8 +1374,8 @@ fn markdown(
                 };
                 let _ = writeln!(
                     md,
-                    "\nStandard deviations from the {} refinement ({}; {test}; covariance scaled by {}).",
-                    u.method,
+                    "\nStandard deviations from {} ({}; {test}; covariance scaled by {}).",
+                    u.source(),
                     u.noise,
                     fmt_num(u.covariance_scale)
                 );

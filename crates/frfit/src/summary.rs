@@ -350,7 +350,11 @@ pub struct ModeUncertaintySummary {
 /// The uncertainty of the final model from the refiner's covariance at its optimum.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct UncertaintySummary {
-    /// The refiner that computed it (`ml`).
+    /// How it was computed: `ml`, the ML refiner's covariance at its own optimum (a
+    /// chain ending in `ml`, without diagnosis steps); `information`, the information
+    /// matrix of the ML criterion at the final model (any other chain, and every
+    /// diagnosis: the asymptotic covariance of an estimate at the ML optimum to first
+    /// order).
     pub method: String,
     /// `measured variance` (maximum likelihood) or `estimated from the residual`.
     pub noise: String,
@@ -371,6 +375,15 @@ pub struct UncertaintySummary {
 }
 
 impl UncertaintySummary {
+    /// Where the standard deviations come from, in words.
+    pub fn source(&self) -> String {
+        match self.method.as_str() {
+            "ml" => "the covariance of the ML refinement at its optimum".into(),
+            "information" => "the information matrix of the ML criterion at the final model (the asymptotic covariance; the chain has no ML link, or the diagnosis refitted the model)".into(),
+            other => format!("the {other} refinement"),
+        }
+    }
+
     /// The standard deviations `(f_hz_std, zeta_std)` of the mode nearest `f_hz` (within
     /// 1e-6 relative), when there is one.
     pub fn mode_std(&self, f_hz: f64) -> Option<(f64, f64)> {

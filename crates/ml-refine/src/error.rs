@@ -34,8 +34,9 @@ pub enum MlError {
         /// What to try.
         hint: String,
     },
-    /// The optimum has poles outside the open left half-plane.
-    #[error("the optimum is unstable: {poles}; try: {hint}")]
+    /// The estimate (the optimum, or the model given to `uncertainty_at`) has poles
+    /// outside the open left half-plane.
+    #[error("the estimate is unstable: {poles}; try: {hint}")]
     Unstable {
         /// The unstable poles, in words.
         poles: String,

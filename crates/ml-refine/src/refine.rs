@@ -392,6 +392,234 @@ impl Estimator for MlRefine {
 }
 
 impl MlRefine {
+    /// The parameter layout of `model` under these settings: its poles, rigid body,
+    /// feedthrough (fitted when [`MlConfig::feedthrough`] says so or the model has one),
+    /// crosstalk, delay (when fitted), dynamics factors, and the residue form
+    /// ([`ResidueForm::Auto`]: constant numerators when every residue is imaginary).
+    fn layout_of(&self, model: &FrfModel) -> Layout {
+        let cfg = &self.config;
+        let const_num = match cfg.residues {
+            ResidueForm::Complex => false,
+            ResidueForm::ConstantNumerator => true,
+            ResidueForm::Auto => {
+                !model.modal.pairs.is_empty()
+                    && model.modal.pairs.iter().all(|p| {
+                        let mut mx: f64 = 0.0;
+                        let mut re: f64 = 0.0;
+                        for j in 0..model.nu() {
+                            for i in 0..model.ny() {
+                                mx = mx.max(p.residue[(i, j)].norm());
+                                re = re.max(p.residue[(i, j)].re.abs());
+                            }
+                        }
+                        re <= 1e-9 * mx
+                    })
+            }
+        };
+        let has_d = (0..model.ny())
+            .any(|i| (0..model.nu()).any(|j| model.modal.feedthrough[(i, j)] != 0.0));
+        Layout {
+            ny: model.ny(),
+            nu: model.nu(),
+            n_pairs: model.modal.pairs.len(),
+            n_real: model.modal.real_poles.len(),
+            n_rigid: model.modal.rigid.len(),
+            feedthrough: cfg.feedthrough.unwrap_or(has_d),
+            crosstalk: model.factors.crosstalk.is_some(),
+            delay: model.factors.delay_fitted,
+            dynamics: model
+                .factors
+                .dynamics
+                .iter()
+                .map(|d| (d.den.len(), d.num.len()))
+                .collect(),
+            const_num,
+        }
+    }
+
+    /// The covariance of the maximum-likelihood criterion at a given estimate: the
+    /// inverse Fisher information `(J^T W J)^{-1}` at `model`'s poles (McKelvey eq.
+    /// (31)-(32)), scaled as [`MlConfig::covariance`] says, with no iterations and no
+    /// change of structure. The linear parameters (residues, rigid body, feedthrough) are
+    /// eliminated by the variable projection as in the refinement (their optimum for
+    /// the given poles), so the cost reported is that of the projected problem.
+    ///
+    /// This is the asymptotic covariance of any consistent estimator that reaches the
+    /// ML optimum to first order: the refined instrumental-variable estimate with the
+    /// noise's variance as its weighting is one (Pintelon and Schoukens, *System
+    /// Identification: A Frequency Domain Approach*, 2nd ed., the asymptotic
+    /// efficiency of the refined IV estimator), so the chains without an ML link report
+    /// their standard deviations through it. At an estimate away from the ML optimum
+    /// (a model with an effect missing) it is a linearisation at that estimate, and the
+    /// cost test's `max(1, V / N_dof)` scale widens it.
+    ///
+    /// Errors: an unstable pole or a pair on the real axis ([`MlError::Unstable`]), a
+    /// parameter the data do not determine ([`MlError::Unidentifiable`]), too few
+    /// data for the parameters.
+    pub fn uncertainty_at<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        model: &FrfModel,
+    ) -> Result<MlReport, MlError> {
+        let cfg = &self.config;
+        if data.ny() != model.ny() || data.nu() != model.nu() {
+            return Err(MlError::invalid(
+                "model",
+                format!("{}x{}", model.ny(), model.nu()),
+                format!("the data are {}x{}", data.ny(), data.nu()),
+            ));
+        }
+        model.validate()?;
+        let mut bad: Vec<String> = model
+            .modal
+            .pairs
+            .iter()
+            .filter(|p| !(p.pole.re < 0.0 && p.pole.im > 0.0))
+            .map(|p| format!("mode at {:.3} Hz with damping {:.3e}", p.f_hz(), p.zeta()))
+            .collect();
+        bad.extend(
+            model
+                .modal
+                .real_poles
+                .iter()
+                .filter(|p| !(p.pole < 0.0))
+                .map(|p| format!("real pole at {:.3e} rad/s", p.pole)),
+        );
+        if !bad.is_empty() {
+            return Err(MlError::Unstable {
+                poles: bad.join(", "),
+                hint: "a covariance is formed at a stable estimate only".into(),
+            });
+        }
+        let weighting = cfg.weighting.resolve(data);
+        let measured = matches!(weighting, Weighting::InverseVariance);
+        let w = weighting.weights(data)?;
+        let sw: Vec<f64> = w.iter().map(|x| (2.0 * x).sqrt()).collect();
+        let lay = self.layout_of(model);
+        let (n, m) = (data.n_lines(), lay.m());
+        let n_params = lay.n_nl() + m * lay.n_lin();
+        if lay.n_lin() == 0 {
+            return Err(MlError::invalid(
+                "model",
+                "no terms",
+                "the model has no poles, rigid body or feedthrough",
+            ));
+        }
+        if 2 * n < lay.n_lin() + lay.n_nl() + 1 || 2 * n * m <= n_params {
+            return Err(MlError::TooFewData {
+                observations: 2 * n * m,
+                params: n_params,
+            });
+        }
+        let theta = nonlinear_start(model, &lay);
+        let prob = Problem::new(
+            lay.clone(),
+            data.omegas(),
+            data.values_vec(),
+            sw,
+            model.clone(),
+        );
+        let ev = prob.evaluate(&theta).map_err(|s| MlError::Unidentifiable {
+            what: format!(
+                "linear term {} of entry ({}, {}) (it is a combination of the others to {:.1e})",
+                s.column,
+                s.entry % lay.ny + 1,
+                s.entry / lay.ny + 1,
+                s.ratio
+            ),
+            condition: if s.ratio > 0.0 {
+                1.0 / s.ratio
+            } else {
+                f64::INFINITY
+            },
+            hint:
+                "two coinciding poles, or a rigid-body or feedthrough term the band does not show"
+                    .into(),
+        })?;
+        let (r, vnorm) = prob.jacobian_r(&theta, &ev);
+        let dof = (n * m) as f64 - n_params as f64 / 2.0;
+        let cost = ev.cost;
+        let ratio = cost / dof;
+        let (expected, p_value) = cost_test(measured, cfg.realizations, cost, dof);
+        let scale = covariance_scale(cfg.covariance, measured, ratio);
+        let n_nl = lay.n_nl();
+        let (cov, cond, weakest) =
+            covariance(&r, n_nl, &vnorm).map_err(|_| MlError::Unidentifiable {
+                what: "the information matrix could not be factorised".into(),
+                condition: f64::INFINITY,
+                hint: "check the data for non-finite values".into(),
+            })?;
+        if n_nl > 0 && (cond.is_nan() || cond > cfg.max_condition) {
+            return Err(MlError::Unidentifiable {
+                what: describe_param(&lay, &theta, weakest, model),
+                condition: cond,
+                hint: "the estimate has a parameter the data do not determine: no covariance"
+                    .into(),
+            });
+        }
+        let c = |a: usize, b: usize| cov[b * n_nl + a] * scale;
+        let modes = mode_uncertainties(&theta, lay.n_pairs, &c);
+        let mut messages = Vec::new();
+        let (delay_s, delay_s_std) = match lay.delay_index() {
+            Some(i) => {
+                let fisher = c(i, i).max(0.0).sqrt();
+                let profile = delay_profile(&prob, &theta, i, (cost, scale), fisher);
+                let std = if profile.half_width > 1.5 * fisher {
+                    messages.push(format!(
+                        "the delay's profile is flatter than its curvature: reported {:.3} us (profile) for {:.3} us (information matrix)",
+                        profile.half_width * 1e6,
+                        fisher * 1e6
+                    ));
+                    profile.half_width
+                } else {
+                    fisher
+                };
+                (Some(theta[i]), Some(std))
+            }
+            None => (None, None),
+        };
+        Ok(MlReport {
+            weighting: weighting.name().to_string(),
+            noise: if measured {
+                "measured variance".into()
+            } else {
+                "estimated from the residual".into()
+            },
+            residue_form: if lay.const_num {
+                "constant_numerator".into()
+            } else {
+                "complex".into()
+            },
+            n_nonlinear: n_nl,
+            n_params,
+            n_observations: 2 * n * m,
+            iterations: 0,
+            cost_history: vec![cost],
+            converged: false,
+            convergence: format!(
+                "not iterated: the information at the given estimate{}",
+                if messages.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", messages.join("; "))
+                }
+            ),
+            cost,
+            dof,
+            cost_ratio: ratio,
+            expected_ratio: expected,
+            p_value,
+            covariance_scale: scale,
+            information_condition: cond,
+            modes,
+            delay_s,
+            delay_s_std,
+            added_modes_hz: Vec::new(),
+            evaluations: 1,
+            jacobians: 1,
+        })
+    }
+
     /// [`Estimator::estimate`] from `model`, after `drops` refinements that ended
     /// unstable (see [`MlConfig::unstable_drops`]) whose messages are `carried`.
     fn estimate_from<D: FrfDataset + ?Sized + Sync>(
@@ -446,43 +674,8 @@ impl MlRefine {
         let measured = matches!(weighting, Weighting::InverseVariance);
         let w = weighting.weights(data)?;
         let sw: Vec<f64> = w.iter().map(|x| (2.0 * x).sqrt()).collect();
-        let const_num = match cfg.residues {
-            ResidueForm::Complex => false,
-            ResidueForm::ConstantNumerator => true,
-            ResidueForm::Auto => {
-                !model.modal.pairs.is_empty()
-                    && model.modal.pairs.iter().all(|p| {
-                        let mut mx: f64 = 0.0;
-                        let mut re: f64 = 0.0;
-                        for j in 0..model.nu() {
-                            for i in 0..model.ny() {
-                                mx = mx.max(p.residue[(i, j)].norm());
-                                re = re.max(p.residue[(i, j)].re.abs());
-                            }
-                        }
-                        re <= 1e-9 * mx
-                    })
-            }
-        };
-        let has_d = (0..model.ny())
-            .any(|i| (0..model.nu()).any(|j| model.modal.feedthrough[(i, j)] != 0.0));
-        let lay = Layout {
-            ny: model.ny(),
-            nu: model.nu(),
-            n_pairs: model.modal.pairs.len(),
-            n_real: model.modal.real_poles.len(),
-            n_rigid: model.modal.rigid.len(),
-            feedthrough: cfg.feedthrough.unwrap_or(has_d),
-            crosstalk: model.factors.crosstalk.is_some(),
-            delay: model.factors.delay_fitted,
-            dynamics: model
-                .factors
-                .dynamics
-                .iter()
-                .map(|d| (d.den.len(), d.num.len()))
-                .collect(),
-            const_num,
-        };
+        let lay = self.layout_of(&model);
+        let const_num = lay.const_num;
         let (n, m) = (data.n_lines(), lay.m());
         let n_params = lay.n_nl() + m * lay.n_lin();
         if lay.n_lin() == 0 {
@@ -966,27 +1159,8 @@ impl MlRefine {
         let dof = (n * m) as f64 - n_params as f64 / 2.0;
         let cost = out.eval.cost;
         let ratio = cost / dof;
-        let (expected, p_value) = if measured {
-            match cfg.realizations {
-                Some(r) if r >= 4 => {
-                    let d2 = 2.0 * (r as f64 - 1.0);
-                    let mu = d2 / (d2 - 2.0);
-                    let var = d2.powi(3) / ((d2 - 2.0).powi(2) * (d2 - 4.0));
-                    (
-                        mu,
-                        Some(normal_upper_tail((ratio - mu) / (var / dof).sqrt())),
-                    )
-                }
-                _ => (1.0, Some(chi2_upper_tail(2.0 * cost, 2.0 * dof))),
-            }
-        } else {
-            (1.0, None)
-        };
-        let scale = match (cfg.covariance, measured) {
-            (CovarianceScale::Fisher, _) => 1.0,
-            (CovarianceScale::CostRatio, _) | (CovarianceScale::Auto, false) => ratio,
-            (CovarianceScale::Auto, true) => ratio.max(1.0),
-        };
+        let (expected, p_value) = cost_test(measured, cfg.realizations, cost, dof);
+        let scale = covariance_scale(cfg.covariance, measured, ratio);
         let n_nl = lay.n_nl();
         let (cov, cond, weakest) =
             covariance(&out.r, n_nl, &out.vnorm).map_err(|_| MlError::Unidentifiable {
@@ -1038,27 +1212,7 @@ impl MlRefine {
             });
         }
         let c = |a: usize, b: usize| cov[b * n_nl + a] * scale;
-        let modes = (0..np)
-            .map(|q| {
-                let (a, b) = (out.theta[2 * q], out.theta[2 * q + 1]);
-                let r = (a * a + b * b).sqrt();
-                // f = r / 2 pi, zeta = -a / r
-                let gf = [a / (r * TAU), b / (r * TAU)];
-                let gz = [-b * b / (r * r * r), a * b / (r * r * r)];
-                let quad = |g: [f64; 2]| {
-                    let (i, j) = (2 * q, 2 * q + 1);
-                    (g[0] * g[0] * c(i, i) + 2.0 * g[0] * g[1] * c(i, j) + g[1] * g[1] * c(j, j))
-                        .max(0.0)
-                        .sqrt()
-                };
-                ModeUncertainty {
-                    f_hz: r / TAU,
-                    f_hz_std: quad(gf),
-                    zeta: -a / r,
-                    zeta_std: quad(gz),
-                }
-            })
-            .collect();
+        let modes = mode_uncertainties(&out.theta, np, &c);
         let (delay_s, delay_s_std) = match lay.delay_index() {
             Some(i) => {
                 let fisher = c(i, i).max(0.0).sqrt();
@@ -1162,6 +1316,75 @@ impl MlRefine {
         }
         Ok(fit)
     }
+}
+
+/// The cost test of a weighted cost `cost` with `dof` complex degrees of freedom: its
+/// expected ratio `V / N_dof` (1, or `d2 / (d2 - 2)` with `d2 = 2 (R - 1)` for a variance
+/// from `R >= 4` realizations) and the p-value of the observed one (`None` without a
+/// measured variance).
+fn cost_test(
+    measured: bool,
+    realizations: Option<usize>,
+    cost: f64,
+    dof: f64,
+) -> (f64, Option<f64>) {
+    let ratio = cost / dof;
+    if !measured {
+        return (1.0, None);
+    }
+    match realizations {
+        Some(r) if r >= 4 => {
+            let d2 = 2.0 * (r as f64 - 1.0);
+            let mu = d2 / (d2 - 2.0);
+            let var = d2.powi(3) / ((d2 - 2.0).powi(2) * (d2 - 4.0));
+            (
+                mu,
+                Some(normal_upper_tail((ratio - mu) / (var / dof).sqrt())),
+            )
+        }
+        _ => (1.0, Some(chi2_upper_tail(2.0 * cost, 2.0 * dof))),
+    }
+}
+
+/// The factor the inverse Fisher information is multiplied by ([`CovarianceScale`]).
+fn covariance_scale(rule: CovarianceScale, measured: bool, ratio: f64) -> f64 {
+    match (rule, measured) {
+        (CovarianceScale::Fisher, _) => 1.0,
+        (CovarianceScale::CostRatio, _) | (CovarianceScale::Auto, false) => ratio,
+        (CovarianceScale::Auto, true) => ratio.max(1.0),
+    }
+}
+
+/// Each pole pair's natural frequency `f = |p| / 2 pi` and damping `zeta = -Re p / |p|`
+/// with their standard deviations by the delta method from the covariance `c(a, b)` of
+/// the pairs' real and imaginary parts (the first `2 np` entries of `theta`, McKelvey eq.
+/// (31)-(32)).
+fn mode_uncertainties(
+    theta: &[f64],
+    np: usize,
+    c: &dyn Fn(usize, usize) -> f64,
+) -> Vec<ModeUncertainty> {
+    (0..np)
+        .map(|q| {
+            let (a, b) = (theta[2 * q], theta[2 * q + 1]);
+            let r = (a * a + b * b).sqrt();
+            // f = r / 2 pi, zeta = -a / r
+            let gf = [a / (r * TAU), b / (r * TAU)];
+            let gz = [-b * b / (r * r * r), a * b / (r * r * r)];
+            let quad = |g: [f64; 2]| {
+                let (i, j) = (2 * q, 2 * q + 1);
+                (g[0] * g[0] * c(i, i) + 2.0 * g[0] * g[1] * c(i, j) + g[1] * g[1] * c(j, j))
+                    .max(0.0)
+                    .sqrt()
+            };
+            ModeUncertainty {
+                f_hz: r / TAU,
+                f_hz_std: quad(gf),
+                zeta: -a / r,
+                zeta_std: quad(gz),
+            }
+        })
+        .collect()
 }
 
 /// The F statistic of the structure tests (a mode added, integrators dropped): the cost

@@ -53,14 +53,14 @@ pub fn print_fit(out: &PipelineOutput) {
             }
             match u.p_value {
                 Some(p) => println!(
-                    "uncertainty: {} ({}), cost ratio V/N_dof {:.3} (expected {:.3}, p = {p:.2e})",
-                    u.method, u.noise, u.cost_ratio, u.expected_ratio
+                    "uncertainty from {} ({}), cost ratio V/N_dof {:.3} (expected {:.3}, p = {p:.2e})",
+                    u.source(), u.noise, u.cost_ratio, u.expected_ratio
                 ),
                 // without a measured variance the ratio is the noise scale itself: it
                 // scales the covariance and tests nothing
                 None => println!(
-                    "uncertainty: {} ({}), noise scale V/N_dof {:.3e} of the weighted residual scales the covariance (no goodness-of-fit test without a measured variance)",
-                    u.method, u.noise, u.cost_ratio
+                    "uncertainty from {} ({}), noise scale V/N_dof {:.3e} of the weighted residual scales the covariance (no goodness-of-fit test without a measured variance)",
+                    u.source(), u.noise, u.cost_ratio
                 ),
             }
         }

@@ -7,7 +7,8 @@ use crate::FrfitError;
 use additive_riv::chain::PROPORTIONAL_RESIDUE_TOL;
 use additive_riv::riv::iterate;
 use additive_riv::{fit_numerators, AdditiveModel, CmifInitReport, FitterReport, RivReport};
-use frf_data::{ChainSettings, Fit, LinkReport, ModelStructure, Precomputed};
+use frf_data::{ChainSettings, Fit, LinkReport, ModelStructure, Precomputed, Timing};
+use std::time::Instant;
 
 /// The first fit of a run and where it came from.
 pub struct FirstFit {
@@ -143,10 +144,17 @@ fn second_start(
     let mut run_first = chain_run_of(fd, &first);
     let fpe_first = run_first.fpe.unwrap_or(f64::INFINITY);
     let second_fc = start_fitter_config(ctx, &second_cfg, delay, quiet);
-    let second = match chain_fit(ctx, &second_cfg, &second_fc) {
+    let t = Instant::now();
+    let second = chain_fit(ctx, &second_cfg, &second_fc);
+    let second_time = Timing {
+        stage: format!("second start: {SECOND_START} -> {}", second_cfg.refine),
+        seconds: t.elapsed().as_secs_f64(),
+    };
+    let second = match second {
         Ok(s) => s,
         Err(e) => {
             let mut first = first;
+            first.fit.timings.push(second_time);
             first.fit.messages.push(format!(
                 "second start: the {} chain {why}; the {SECOND_START} chain from the start failed ({e}), so the first chain's fit is kept",
                 first.chain.join(" -> ")
@@ -166,7 +174,12 @@ fn second_start(
         second.chain.join(" -> "),
         if keep_second { "it is" } else { "the first is" }
     );
+    // the run's stages: the first chain's own and the second start's wall time (the
+    // second chain's own stages are inside it)
+    let mut stages = first.fit.timings.clone();
+    stages.push(second_time);
     let mut kept = if keep_second { second } else { first };
+    kept.fit.timings = stages;
     kept.fit.messages.push(note);
     kept.chain_runs = runs;
     Ok(third_start(ctx, cfg, kept, delay, quiet))
@@ -237,6 +250,9 @@ fn third_start(
         runs.push(run_kept);
     }
     let mut tried: Vec<String> = Vec::new();
+    // the wall time of each start, added to the stages of the run (the first chain's
+    // own stages and the second start's time stay as they are)
+    let mut times: Vec<Timing> = Vec::new();
     let mut best: Option<(f64, FirstFit, usize)> = None;
     for (init, refine) in THIRD_STARTS {
         let c = PipelineConfig {
@@ -244,7 +260,13 @@ fn third_start(
             refine: refine.to_string(),
             ..cfg.clone()
         };
-        match chain_fit(ctx, &c, &start_fitter_config(ctx, &c, delay, quiet)) {
+        let t = Instant::now();
+        let result = chain_fit(ctx, &c, &start_fitter_config(ctx, &c, delay, quiet));
+        times.push(Timing {
+            stage: format!("third start: {init} -> {refine}"),
+            seconds: t.elapsed().as_secs_f64(),
+        });
+        match result {
             Ok(f) => {
                 let run = chain_run_of(fd, &f);
                 let fpe = run.fpe.unwrap_or(f64::INFINITY);
@@ -287,6 +309,10 @@ fn third_start(
                 "{head}: the converged {} fit is kept",
                 f.chain.join(" -> ")
             ));
+            // the run's stages: the first chain's and the further starts' (the kept
+            // third start's own stages are inside its time)
+            f.fit.timings = std::mem::take(&mut kept.fit.timings);
+            f.fit.timings.extend(times);
             f.chain_runs = runs;
             f
         }
@@ -294,6 +320,7 @@ fn third_start(
             kept.fit.messages.push(format!(
                 "{head}: none converged at a final prediction error no higher, so the non-converged fit is kept"
             ));
+            kept.fit.timings.extend(times);
             kept.chain_runs = runs;
             kept
         }

@@ -394,7 +394,7 @@ pub fn run(
     // the final model's response, when the diagnosis computed it
     let mut diagnosed_response = None;
     let Diagnosis {
-        fit,
+        mut fit,
         steps,
         step_responses,
         stages,
@@ -483,6 +483,25 @@ pub fn run(
         initial_errors
     };
     timings.stage("residual analysis and line-to-line floor", t);
+    // the ML link's covariance at its optimum when the final model is the chain's own;
+    // otherwise (another refiner, or a diagnosis that refitted the model) the information
+    // of the ML criterion at the final model
+    let t = Instant::now();
+    let uncertainty = match (!cfg.diagnose)
+        .then(|| summarize::ml_uncertainty(&first_links))
+        .flatten()
+    {
+        Some(u) => Some(u),
+        None => match summarize::information_uncertainty(&ctx, &fit.model) {
+            Ok(u) => Some(u),
+            Err(why) => {
+                fit.messages
+                    .push(format!("no standard deviations for the final model: {why}"));
+                None
+            }
+        },
+    };
+    timings.stage("uncertainty", t);
     timings.stage("total", t0);
     let summary = build_summary(
         &ctx,
@@ -504,12 +523,7 @@ pub fn run(
             chain: first_chain.clone(),
             chain_runs: first_chain_runs,
             from_fit,
-            // the diagnosis refits the model: the chain's covariance no longer applies
-            uncertainty: if cfg.diagnose {
-                None
-            } else {
-                summarize::ml_uncertainty(&first_links)
-            },
+            uncertainty,
         },
     );
     let peaks = fitter_report.cmif_peaks.clone();

@@ -353,6 +353,16 @@ pub(crate) struct RunRecord<'a> {
 pub(crate) fn ml_uncertainty(links: &[frf_data::LinkReport]) -> Option<UncertaintySummary> {
     let l = links.iter().rev().find(|l| l.link == "ml")?;
     let r: ml_refine::MlReport = serde_json::from_value(l.details.clone()).ok()?;
+    Some(uncertainty_summary(ML_METHOD, &r))
+}
+
+/// [`UncertaintySummary::method`] of the ML refiner's covariance at its own optimum.
+pub const ML_METHOD: &str = "ml";
+/// [`UncertaintySummary::method`] of the information of the ML criterion at the final
+/// model of any other chain or of a diagnosis ([`information_uncertainty`]).
+pub const INFORMATION_METHOD: &str = "information";
+
+fn uncertainty_summary(method: &str, r: &ml_refine::MlReport) -> UncertaintySummary {
     let mut modes: Vec<ModeUncertaintySummary> = r
         .modes
         .iter()
@@ -364,9 +374,9 @@ pub(crate) fn ml_uncertainty(links: &[frf_data::LinkReport]) -> Option<Uncertain
         })
         .collect();
     modes.sort_by(|a, b| a.f_hz.total_cmp(&b.f_hz));
-    Some(UncertaintySummary {
-        method: "ml".into(),
-        noise: r.noise,
+    UncertaintySummary {
+        method: method.into(),
+        noise: r.noise.clone(),
         cost_ratio: r.cost_ratio,
         expected_ratio: r.expected_ratio,
         p_value: r.p_value,
@@ -374,7 +384,32 @@ pub(crate) fn ml_uncertainty(links: &[frf_data::LinkReport]) -> Option<Uncertain
         modes,
         delay_s: r.delay_s,
         delay_s_std: r.delay_s_std,
-    })
+    }
+}
+
+/// The uncertainty of `model` (the final model of a chain without an ML link, or of a
+/// diagnosis) from the information matrix of the maximum-likelihood criterion at it
+/// ([`ml_refine::MlRefine::uncertainty_at`]), on the band's data with the fit's
+/// weighting and the stated realizations: the asymptotic covariance of an estimate at
+/// the ML optimum to first order (the refined IV estimate is asymptotically efficient),
+/// scaled up by the cost ratio when the residual exceeds the noise. An error in words
+/// when the model has no covariance (an unstable pole, a parameter the data do not
+/// determine).
+pub(crate) fn information_uncertainty(
+    ctx: &FitContext,
+    model: &AdditiveModel,
+) -> Result<UncertaintySummary, String> {
+    use frf_data::ModelStructure;
+    let fm = model.to_frf_model().map_err(|e| e.to_string())?;
+    let ml = ml_refine::MlRefine::new(ml_refine::MlConfig {
+        weighting: ctx.weighting.clone(),
+        realizations: ctx.declared.realizations,
+        ..Default::default()
+    });
+    let r = ml
+        .uncertainty_at(&ctx.band, &fm)
+        .map_err(|e| e.to_string())?;
+    Ok(uncertainty_summary(INFORMATION_METHOD, &r))
 }
 
 /// The summary of a run on `ctx` with `cfg`.
