@@ -75,6 +75,10 @@ pub struct ReportInput<'a> {
     pub initial: &'a ResponseGrid,
     /// Response of the final model at the data's lines.
     pub final_model: &'a ResponseGrid,
+    /// Standard deviation of the final model's response at the data's lines (layout as
+    /// `noise_var`), from its parameters' covariance; `None` when none was formed. The
+    /// Bode and entry plots draw the model's `+- 2 sigma` band with it.
+    pub final_model_std: Option<&'a [f64]>,
     /// For each `summary.steps[i]`, the model response before and after that step.
     pub steps: &'a [(ResponseGrid, ResponseGrid)],
     /// Title of the report.
@@ -274,16 +278,34 @@ fn check_input(input: &ReportInput, summary: &Summary) -> Result<(), FrfitError>
         grid(&format!("response before step {}", i + 1), b)?;
         grid(&format!("response after step {}", i + 1), a)?;
     }
-    if let Some(v) = input.noise_var {
-        if v.len() != n * ny * nu {
-            return Err(dim(
-                "noise variance",
-                format!("{} ({n} lines x {ny}x{nu})", n * ny * nu),
-                v.len().to_string(),
-            ));
+    for (what, v) in [
+        ("noise variance", input.noise_var),
+        ("final model's standard deviation", input.final_model_std),
+    ] {
+        if let Some(v) = v {
+            if v.len() != n * ny * nu {
+                return Err(dim(
+                    what,
+                    format!("{} ({n} lines x {ny}x{nu})", n * ny * nu),
+                    v.len().to_string(),
+                ));
+            }
         }
     }
     Ok(())
+}
+
+/// The magnitudes `|P| + 2 sigma` and `|P| - 2 sigma` of entry `e` (layout `[k * m + e]`)
+/// of the model response `p` with standard deviation `std`: the model's band. The lower
+/// edge is left out (NaN, a gap in the line) where it is not positive.
+fn two_sigma_band(p: &ResponseGrid, std: &[f64], e: usize, m: usize) -> (Vec<f64>, Vec<f64>) {
+    let n = p.values.len() / m.max(1);
+    (0..n)
+        .map(|k| {
+            let (a, s) = (p.values[k * m + e].norm(), 2.0 * std[k * m + e]);
+            (a + s, if a - s > 0.0 { a - s } else { f64::NAN })
+        })
+        .unzip()
 }
 
 fn write_text(path: &Path, text: &str) -> Result<(), FrfitError> {
@@ -544,6 +566,16 @@ fn bode_grid_svg(path: &Path, input: &ReportInput, fin: &Residual) -> Result<Str
                 .with_color(MODEL_COLOR)
                 .with_width(3),
         );
+        if let Some(std) = input.final_model_std {
+            let (hi, lo) = two_sigma_band(input.final_model, std, e, m);
+            for (name, v) in [("model +- 2 sigma", hi), ("", lo)] {
+                panel.series.push(
+                    Series::dashed(name, freqs.to_vec(), v)
+                        .with_color(MODEL_COLOR)
+                        .with_width(1),
+                );
+            }
+        }
         panel
             .series
             .push(Series::line("data", freqs.to_vec(), g).with_color(DATA_COLOR));
@@ -583,9 +615,15 @@ fn bode_grid_svg(path: &Path, input: &ReportInput, fin: &Residual) -> Result<Str
         legend: true,
     };
     grid.write_svg(path)?;
+    let band = if input.final_model_std.is_some() {
+        "; the thin dashed orange lines are the model's +- 2 sigma band from the covariance of \
+         its parameters (they merge with the model where the data determine it well)"
+    } else {
+        ""
+    };
     Ok(format!(
         "Element-wise Bode magnitude of the data (blue line) and the final model (orange \
-         band under it), {}; shared log axes.",
+         band under it), {}; shared log axes{band}.",
         layout.note
     ))
 }
@@ -722,6 +760,22 @@ fn entry_svg(path: &Path, input: &ReportInput, fin: &Residual) -> Result<String,
         plot.series
             .push(Series::line("noise std sqrt(var)", freqs.clone(), s).with_color(NOISE_COLOR));
     }
+    if let Some(std) = input.final_model_std {
+        let (hi, lo) = two_sigma_band(input.final_model, std, e, m);
+        for (name, v) in [("model +- 2 sigma", hi), ("", lo)] {
+            plot.series.push(
+                Series::dashed(name, freqs.clone(), v)
+                    .with_color(MODEL_COLOR)
+                    .with_width(1),
+            );
+        }
+        // the model's own uncertainty next to the noise and the residual
+        let s2 = (0..n).map(|k| 2.0 * std[k * m + e]).collect();
+        plot.series.push(
+            Series::dashed("model 2 sigma (its uncertainty)", freqs.clone(), s2)
+                .with_color(NOISE_COLOR),
+        );
+    }
     if let (Some(&lo), Some(&hi)) = (
         freqs.iter().find(|f| **f > 0.0),
         freqs.iter().rev().find(|f| **f > 0.0),
@@ -753,10 +807,17 @@ fn entry_svg(path: &Path, input: &ReportInput, fin: &Residual) -> Result<String,
     } else {
         ""
     };
+    let band = if input.final_model_std.is_some() {
+        "; the dashed orange lines are the model's +- 2 sigma band and the dashed grey line \
+         its 2 sigma level, from the covariance of its parameters (what the data's noise \
+         leaves uncertain in the model, not an error it misses)"
+    } else {
+        ""
+    };
     Ok(format!(
         "Entry {name} (output {}, input {}), {why}: data (blue line), final model (orange \
          band), \
-         residual |G - P| (red dots){noise}.",
+         residual |G - P| (red dots){noise}{band}.",
         i + 1,
         j + 1
     ))

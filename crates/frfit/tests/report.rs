@@ -326,6 +326,7 @@ fn full_report_with_steps_and_variance() {
         peaks: &peaks,
         initial: &initial,
         final_model: &truth_g,
+        final_model_std: None,
         steps: &steps,
         title: "Synthetic 2 x 3 plant",
     };
@@ -373,6 +374,45 @@ fn full_report_with_steps_and_variance() {
     cleanup(&dir);
 }
 
+/// Issue 44: with the final model's standard deviation the Bode grid and the entry plot
+/// draw its +- 2 sigma band and say so; a standard deviation of the wrong length is an
+/// error that names it.
+#[test]
+fn the_model_band_is_drawn_and_its_length_checked() {
+    let (data, truth_g, var) = synthetic(2, 3, 400);
+    let c = cmif(&data).unwrap();
+    let peaks = pick_peaks(&c, &PeakConfig::default());
+    let s = summary(&data, Vec::new(), None);
+    let std: Vec<f64> = truth_g.values.iter().map(|v| 0.01 * v.norm()).collect();
+    let input = ReportInput {
+        data: &data,
+        noise_var: Some(&var),
+        cmif: &c,
+        peaks: &peaks,
+        initial: &truth_g,
+        final_model: &truth_g,
+        final_model_std: Some(&std),
+        steps: &[],
+        title: "band",
+    };
+    let dir = temp_dir("band");
+    let files = write_report(&dir, &input, &s).unwrap();
+    let md = check_files(&dir, &files);
+    assert!(md.contains("+- 2 sigma band"), "{md}");
+    for svg in ["entry.svg", "bode_grid.svg"] {
+        let text = std::fs::read_to_string(dir.join(svg)).unwrap();
+        assert!(text.contains("model +- 2 sigma"), "{svg}");
+    }
+    let short = &std[1..];
+    let bad = ReportInput {
+        final_model_std: Some(short),
+        ..input
+    };
+    let e = write_report(&dir, &bad, &s).unwrap_err().to_string();
+    assert!(e.contains("final model's standard deviation"), "{e}");
+    cleanup(&dir);
+}
+
 #[test]
 fn empty_diagnosis_without_variance() {
     let (data, truth_g, _) = synthetic(2, 3, 200);
@@ -386,6 +426,7 @@ fn empty_diagnosis_without_variance() {
         peaks: &[],
         initial: &truth_g,
         final_model: &truth_g,
+        final_model_std: None,
         steps: &[],
         title: "",
     };
@@ -418,6 +459,7 @@ fn large_plant_shows_a_documented_subset() {
         peaks: &[],
         initial: &g,
         final_model: &g,
+        final_model_std: None,
         steps: &[],
         title: "8 x 9",
     };
@@ -453,6 +495,7 @@ fn mismatched_inputs_are_errors() {
         peaks: &[],
         initial: &truth_g,
         final_model: &truth_g,
+        final_model_std: None,
         steps: &[],
         title: "x",
     };
@@ -463,6 +506,7 @@ fn mismatched_inputs_are_errors() {
     let s0 = summary(&data, vec![], None);
     let input = ReportInput {
         final_model: &short,
+        final_model_std: None,
         steps: &[],
         ..input
     };
@@ -471,6 +515,7 @@ fn mismatched_inputs_are_errors() {
     // A variance of the wrong length.
     let input = ReportInput {
         final_model: &truth_g,
+        final_model_std: None,
         noise_var: Some(&var[..7]),
         ..input
     };
@@ -506,6 +551,7 @@ fn degenerate_inputs_do_not_panic() {
         peaks: &[],
         initial: &model,
         final_model: &model,
+        final_model_std: None,
         steps: &steps,
         title: "degenerate",
     };
@@ -570,6 +616,7 @@ fn wafer_report() {
         peaks: &peaks,
         initial: &initial,
         final_model: &fin,
+        final_model_std: None,
         steps: &steps,
         title: "Wafer stage, nominal: truth model",
     };
@@ -615,6 +662,7 @@ fn a_superseded_step_is_marked() {
         peaks: &[],
         initial: &truth_g,
         final_model: &truth_g,
+        final_model_std: None,
         steps: &responses,
         title: "x",
     };

@@ -376,6 +376,31 @@ const GROUP_PEAK_OVER_MEDIAN: f64 = 20.0;
 /// Lines either side within which a residual peak must be the largest.
 const GROUP_PEAK_HALF_WINDOW: usize = 5;
 
+/// The information of the ML criterion at a given estimate ([`MlRefine::information_at`]).
+struct Information {
+    /// The projected problem at the estimate's structure.
+    prob: Problem,
+    /// The estimate's nonlinear parameters.
+    theta: Vec<f64>,
+    /// The linear parameters and cost at `theta`.
+    ev: crate::varpro::Eval,
+    /// `(R^T R)^{-1}` of the nonlinear parameters, column-major, unscaled.
+    cov: Vec<f64>,
+    /// Condition number of the scaled information matrix.
+    cond: f64,
+    cost: f64,
+    dof: f64,
+    ratio: f64,
+    expected: f64,
+    p_value: Option<f64>,
+    /// The covariance scale ([`MlConfig::covariance`]).
+    scale: f64,
+    measured: bool,
+    weighting_name: String,
+    n_params: usize,
+    n_observations: usize,
+}
+
 impl Estimator for MlRefine {
     type Model = FrfModel;
     type Start = ChainModel;
@@ -437,30 +462,14 @@ impl MlRefine {
         }
     }
 
-    /// The covariance of the maximum-likelihood criterion at a given estimate: the
-    /// inverse Fisher information `(J^T W J)^{-1}` at `model`'s poles (McKelvey eq.
-    /// (31)-(32)), scaled as [`MlConfig::covariance`] says, with no iterations and no
-    /// change of structure. The linear parameters (residues, rigid body, feedthrough) are
-    /// eliminated by the variable projection as in the refinement (their optimum for
-    /// the given poles), so the cost reported is that of the projected problem.
-    ///
-    /// This is the asymptotic covariance of any consistent estimator that reaches the
-    /// ML optimum to first order: the refined instrumental-variable estimate with the
-    /// noise's variance as its weighting is one (Pintelon and Schoukens, *System
-    /// Identification: A Frequency Domain Approach*, 2nd ed., the asymptotic
-    /// efficiency of the refined IV estimator), so the chains without an ML link report
-    /// their standard deviations through it. At an estimate away from the ML optimum
-    /// (a model with an effect missing) it is a linearisation at that estimate, and the
-    /// cost test's `max(1, V / N_dof)` scale widens it.
-    ///
-    /// Errors: an unstable pole or a pair on the real axis ([`MlError::Unstable`]), a
-    /// parameter the data do not determine ([`MlError::Unidentifiable`]), too few
-    /// data for the parameters.
-    pub fn uncertainty_at<D: FrfDataset + ?Sized + Sync>(
+    /// The information of the ML criterion at `model` (see [`MlRefine::uncertainty_at`]):
+    /// the projected problem at its poles, the unscaled covariance of the nonlinear
+    /// parameters, the cost test and the covariance scale; the same checks and errors.
+    fn information_at<D: FrfDataset + ?Sized + Sync>(
         &self,
         data: &D,
         model: &FrfModel,
-    ) -> Result<MlReport, MlError> {
+    ) -> Result<Information, MlError> {
         let cfg = &self.config;
         if data.ny() != model.ny() || data.nu() != model.nu() {
             return Err(MlError::invalid(
@@ -557,6 +566,68 @@ impl MlRefine {
                     .into(),
             });
         }
+        Ok(Information {
+            prob,
+            theta,
+            ev,
+            cov,
+            cond,
+            cost,
+            dof,
+            ratio,
+            expected,
+            p_value,
+            scale,
+            measured,
+            weighting_name: weighting.name().to_string(),
+            n_params,
+            n_observations: 2 * n * m,
+        })
+    }
+
+    /// The covariance of the maximum-likelihood criterion at a given estimate: the
+    /// inverse Fisher information `(J^T W J)^{-1}` at `model`'s poles (McKelvey eq.
+    /// (31)-(32)), scaled as [`MlConfig::covariance`] says, with no iterations and no
+    /// change of structure. The linear parameters (residues, rigid body, feedthrough) are
+    /// eliminated by the variable projection as in the refinement (their optimum for
+    /// the given poles), so the cost reported is that of the projected problem.
+    ///
+    /// This is the asymptotic covariance of any consistent estimator that reaches the
+    /// ML optimum to first order: the refined instrumental-variable estimate with the
+    /// noise's variance as its weighting is one (Pintelon and Schoukens, *System
+    /// Identification: A Frequency Domain Approach*, 2nd ed., the asymptotic
+    /// efficiency of the refined IV estimator), so the chains without an ML link report
+    /// their standard deviations through it. At an estimate away from the ML optimum
+    /// (a model with an effect missing) it is a linearisation at that estimate, and the
+    /// cost test's `max(1, V / N_dof)` scale widens it.
+    ///
+    /// Errors: an unstable pole or a pair on the real axis ([`MlError::Unstable`]), a
+    /// parameter the data do not determine ([`MlError::Unidentifiable`]), too few
+    /// data for the parameters.
+    pub fn uncertainty_at<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        model: &FrfModel,
+    ) -> Result<MlReport, MlError> {
+        let Information {
+            prob,
+            theta,
+            ev: _,
+            cov,
+            cond,
+            cost,
+            dof,
+            ratio,
+            expected,
+            p_value,
+            scale,
+            measured,
+            weighting_name,
+            n_params,
+            n_observations,
+        } = self.information_at(data, model)?;
+        let lay = &prob.lay;
+        let n_nl = lay.n_nl();
         let c = |a: usize, b: usize| cov[b * n_nl + a] * scale;
         let modes = mode_uncertainties(&theta, lay.n_pairs, &c);
         let mut messages = Vec::new();
@@ -579,7 +650,7 @@ impl MlRefine {
             None => (None, None),
         };
         Ok(MlReport {
-            weighting: weighting.name().to_string(),
+            weighting: weighting_name,
             noise: if measured {
                 "measured variance".into()
             } else {
@@ -592,7 +663,7 @@ impl MlRefine {
             },
             n_nonlinear: n_nl,
             n_params,
-            n_observations: 2 * n * m,
+            n_observations,
             iterations: 0,
             cost_history: vec![cost],
             converged: false,
@@ -618,6 +689,29 @@ impl MlRefine {
             evaluations: 1,
             jacobians: 1,
         })
+    }
+
+    /// The standard deviation of `model`'s response at every line of `data` and entry
+    /// (layout `[k * m + e]` as [`FrfDataset::values`]), `sqrt(E |P - E P|^2)` to first
+    /// order, from the same information and scale as [`MlRefine::uncertainty_at`]: the
+    /// poles' covariance through the projected Jacobian plus the leverage of each
+    /// entry's linear fit ([`crate::varpro::Problem::response_variance`]). It is what
+    /// the data's noise leaves uncertain in the model's response (the band on the
+    /// report's Bode and entry plots), not the model's error against a truth it misses.
+    /// Same errors as `uncertainty_at`.
+    pub fn response_std_at<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        model: &FrfModel,
+    ) -> Result<Vec<f64>, MlError> {
+        let info = self.information_at(data, model)?;
+        let var = info
+            .prob
+            .response_variance(&info.theta, &info.ev, &info.cov);
+        Ok(var
+            .into_iter()
+            .map(|v| (v * info.scale).max(0.0).sqrt())
+            .collect())
     }
 
     /// [`Estimator::estimate`] from `model`, after `drops` refinements that ended

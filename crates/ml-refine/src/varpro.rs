@@ -510,6 +510,81 @@ impl Problem {
         })
     }
 
+    /// Writes the weighted derivatives of entry `e`'s response with respect to the
+    /// nonlinear parameters (poles, real poles, delay, dynamics coefficients), with the
+    /// linear parameters `c` of the entry, into columns `n_lin..n_lin + n_nl` of the
+    /// row-major `2N x cols` matrix `a` (rows as in [`Problem::fill_basis`]).
+    fn fill_nonlinear(
+        &self,
+        lines: &Lines,
+        f: &realize::KnownFactors,
+        e: usize,
+        c: &[f64],
+        a: &mut [f64],
+        cols: usize,
+    ) {
+        let lay = &self.lay;
+        let (n, m, n_lin, n_lc) = (self.n_lines(), lay.m(), lay.n_lin(), lay.n_lc());
+        let (np, cpp) = (lay.n_pairs, lay.cpp());
+        let (i_out, j_in) = (e % lay.ny, e / lay.ny);
+        for k in 0..n {
+            let s = self.sw[k * m + e];
+            let d = self.dprod(lines, k, e, None) * s;
+            let (re, im) = a[2 * k * cols..(2 * k + 2) * cols].split_at_mut(cols);
+            let mut put = |col: usize, v: C64| {
+                re[n_lin + col] = v.re;
+                im[n_lin + col] = v.im;
+            };
+            for q in 0..np {
+                for ab in 0..2 {
+                    let base = ((k * np + q) * 2 + ab) * cpp;
+                    let mut v = C64::new(0.0, 0.0);
+                    for cc in 0..cpp {
+                        v += lines.dpair[base + cc] * c[q * cpp + cc];
+                    }
+                    put(2 * q + ab, d * v);
+                }
+            }
+            for r in 0..lay.n_real {
+                let v = lines.dreal[k * lay.n_real + r] * c[np * cpp + r];
+                put(2 * np + r, d * v);
+            }
+            if lay.delay || !lay.dynamics.is_empty() {
+                let mut fr = C64::new(0.0, 0.0);
+                for l in 0..n_lc {
+                    fr += lines.fphi[k * n_lc + l] * c[l];
+                }
+                let mut col = 2 * np + lay.n_real;
+                if lay.delay {
+                    put(col, C64::new(0.0, -self.omega[k]) * d * fr);
+                    col += 1;
+                }
+                let inner = fr + if lay.crosstalk { c[n_lc] } else { 0.0 };
+                let nd = f.dynamics.len();
+                for (di, df) in f.dynamics.iter().enumerate() {
+                    let (nden, nnum) = (df.den.len(), df.num.len());
+                    if df.affects(i_out, j_in) {
+                        let (hd, ad) = lines.dynv[k * nd + di];
+                        let rest = self.dprod(lines, k, e, Some(di)) * inner * s;
+                        let npow = nden.max(nnum);
+                        let xs = &lines.dynx[di][k * npow..(k + 1) * npow];
+                        for ci in 0..nden {
+                            put(col + ci, -rest * hd * xs[ci] / ad);
+                        }
+                        for ci in 0..nnum {
+                            put(col + nden + ci, rest * xs[ci] / ad);
+                        }
+                    } else {
+                        for ci in 0..nden + nnum {
+                            put(col + ci, C64::new(0.0, 0.0));
+                        }
+                    }
+                    col += nden + nnum;
+                }
+            }
+        }
+    }
+
     /// The `R` factor (`(n_nl + 1)^2`, column-major) of the projected Jacobian and
     /// residual `[J | r]` of all entries at `theta`, whose linear parameters `ev` holds,
     /// and the norms of the Jacobian's columns before the projection (a column that the
@@ -522,9 +597,7 @@ impl Problem {
         }
         let lines = self.lines(theta);
         let lay = &self.lay;
-        let (n, m, n_lin, n_lc, n_nl) =
-            (self.n_lines(), lay.m(), lay.n_lin(), lay.n_lc(), lay.n_nl());
-        let (np, cpp) = (lay.n_pairs, lay.cpp());
+        let (n, m, n_lin, n_nl) = (self.n_lines(), lay.m(), lay.n_lin(), lay.n_nl());
         let rows = 2 * n;
         let nb = n_nl + 1;
         let f = self.factors(theta);
@@ -538,63 +611,7 @@ impl Problem {
                 let ycol = n_lin + n_nl;
                 self.fill_basis(&lines, e, a, cols, ycol);
                 let c = &ev.coef[e * n_lin..(e + 1) * n_lin];
-                let (i_out, j_in) = (e % lay.ny, e / lay.ny);
-                for k in 0..n {
-                    let s = self.sw[k * m + e];
-                    let d = self.dprod(&lines, k, e, None) * s;
-                    let (re, im) = a[2 * k * cols..(2 * k + 2) * cols].split_at_mut(cols);
-                    let mut put = |col: usize, v: C64| {
-                        re[n_lin + col] = v.re;
-                        im[n_lin + col] = v.im;
-                    };
-                    for q in 0..np {
-                        for ab in 0..2 {
-                            let base = ((k * np + q) * 2 + ab) * cpp;
-                            let mut v = C64::new(0.0, 0.0);
-                            for cc in 0..cpp {
-                                v += lines.dpair[base + cc] * c[q * cpp + cc];
-                            }
-                            put(2 * q + ab, d * v);
-                        }
-                    }
-                    for r in 0..lay.n_real {
-                        let v = lines.dreal[k * lay.n_real + r] * c[np * cpp + r];
-                        put(2 * np + r, d * v);
-                    }
-                    if lay.delay || !lay.dynamics.is_empty() {
-                        let mut fr = C64::new(0.0, 0.0);
-                        for l in 0..n_lc {
-                            fr += lines.fphi[k * n_lc + l] * c[l];
-                        }
-                        let mut col = 2 * np + lay.n_real;
-                        if lay.delay {
-                            put(col, C64::new(0.0, -self.omega[k]) * d * fr);
-                            col += 1;
-                        }
-                        let inner = fr + if lay.crosstalk { c[n_lc] } else { 0.0 };
-                        let nd = f.dynamics.len();
-                        for (di, df) in f.dynamics.iter().enumerate() {
-                            let (nden, nnum) = (df.den.len(), df.num.len());
-                            if df.affects(i_out, j_in) {
-                                let (hd, ad) = lines.dynv[k * nd + di];
-                                let rest = self.dprod(&lines, k, e, Some(di)) * inner * s;
-                                let npow = nden.max(nnum);
-                                let xs = &lines.dynx[di][k * npow..(k + 1) * npow];
-                                for ci in 0..nden {
-                                    put(col + ci, -rest * hd * xs[ci] / ad);
-                                }
-                                for ci in 0..nnum {
-                                    put(col + nden + ci, rest * xs[ci] / ad);
-                                }
-                            } else {
-                                for ci in 0..nden + nnum {
-                                    put(col + ci, C64::new(0.0, 0.0));
-                                }
-                            }
-                            col += nden + nnum;
-                        }
-                    }
-                }
+                self.fill_nonlinear(&lines, &f, e, c, a, cols);
                 let mut vn = vec![0.0; n_nl];
                 let mut y2 = 0.0;
                 for row in a.chunks_exact(cols) {
@@ -652,6 +669,107 @@ impl Problem {
             }
         }
         (r, vnorm.into_iter().map(f64::sqrt).collect())
+    }
+
+    /// The variance of the fitted response `P_e(j w_k)` at every line and entry (layout
+    /// `[k * m + e]`, `E |P - E P|^2`, the real and imaginary parts' variances summed), to
+    /// first order, from the covariance `cov` (`n_nl x n_nl`, column-major, unscaled: the
+    /// `(R^T R)^{-1}` of [`Problem::jacobian_r`]) of the nonlinear parameters and the
+    /// linear parameters' least-squares fit of each entry at them.
+    ///
+    /// With the weighted Jacobian of entry `e` split into the linear basis `B` and the
+    /// nonlinear columns `D`, the covariance of all parameters gives for the row `[d, b]`
+    /// of one real observation `(d - C M^{-1} b)^T cov (d - C M^{-1} b) + b^T M^{-1} b`
+    /// (`M = B^T B`, `C = D^T B`): the projected Jacobian's row through the poles'
+    /// covariance and the leverage of the linear fit. Summed over every line and entry,
+    /// weighted by `2 w`, it is the number of parameters (the trace of the hat matrix).
+    /// Multiply by the noise scale ([`crate::MlReport::covariance_scale`]).
+    pub fn response_variance(&self, theta: &[f64], ev: &Eval, cov: &[f64]) -> Vec<f64> {
+        use faer::linalg::matmul::matmul;
+        use faer::linalg::solvers::Solve;
+        use faer::{Accum, Mat, Par, Side};
+        let lines = self.lines(theta);
+        let f = self.factors(theta);
+        let lay = &self.lay;
+        let (n, m, n_lin, n_nl) = (self.n_lines(), lay.m(), lay.n_lin(), lay.n_nl());
+        let rows = 2 * n;
+        let cols = n_lin + n_nl + 1;
+        let covm = Mat::from_fn(n_nl, n_nl, |i, j| cov[j * n_nl + i]);
+        let per: Vec<Vec<f64>> = (0..m)
+            .into_par_iter()
+            .map_init(Vec::new, |buf: &mut Vec<f64>, e| {
+                buf.resize(rows * cols, 0.0);
+                let a = &mut buf[..];
+                self.fill_basis(&lines, e, a, cols, n_lin + n_nl);
+                let c = &ev.coef[e * n_lin..(e + 1) * n_lin];
+                self.fill_nonlinear(&lines, &f, e, c, a, cols);
+                // the basis with unit columns (the Gram matrix's conditioning)
+                let norms: Vec<f64> = (0..n_lin)
+                    .map(|l| {
+                        let s = a.chunks_exact(cols).map(|r| r[l] * r[l]).sum::<f64>();
+                        if s > 0.0 {
+                            s.sqrt()
+                        } else {
+                            1.0
+                        }
+                    })
+                    .collect();
+                let b = Mat::from_fn(rows, n_lin, |r, l| a[r * cols + l] / norms[l]);
+                let d = Mat::from_fn(rows, n_nl, |r, l| a[r * cols + n_lin + l]);
+                let gram = b.transpose() * &b;
+                let eye = Mat::<f64>::identity(n_lin, n_lin);
+                let minv = match gram.llt(Side::Lower) {
+                    Ok(l) => l.solve(&eye),
+                    // nearly dependent columns: the eigen-decomposition's pseudo-inverse
+                    Err(_) => match gram.self_adjoint_eigen(Side::Lower) {
+                        Ok(evd) => {
+                            let (u, sv) = (evd.U(), evd.S());
+                            let top = (0..n_lin).map(|i| sv[i]).fold(0.0, f64::max);
+                            Mat::from_fn(n_lin, n_lin, |i, j| {
+                                (0..n_lin)
+                                    .filter(|&k| sv[k] > 1e-13 * top)
+                                    .map(|k| u[(i, k)] * u[(j, k)] / sv[k])
+                                    .sum()
+                            })
+                        }
+                        Err(_) => return vec![f64::NAN; n],
+                    },
+                };
+                // H = B M^-1: leverage h_r = H_r . B_r; U = D - H (B^T D)
+                let h = &b * &minv;
+                let btd = b.transpose() * &d;
+                let mut u = d.clone();
+                matmul(u.as_mut(), Accum::Add, &h, &btd, -1.0, Par::Seq);
+                let w = &u * &covm;
+                let sw = &self.sw;
+                (0..n)
+                    .map(|k| {
+                        let s = sw[k * m + e];
+                        let mut v = 0.0;
+                        for r in [2 * k, 2 * k + 1] {
+                            for l in 0..n_lin {
+                                v += h[(r, l)] * b[(r, l)];
+                            }
+                            for l in 0..n_nl {
+                                v += w[(r, l)] * u[(r, l)];
+                            }
+                        }
+                        if s > 0.0 {
+                            v / (s * s)
+                        } else {
+                            f64::NAN
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut out = vec![0.0; n * m];
+        for (e, v) in per.into_iter().enumerate() {
+            for (k, x) in v.into_iter().enumerate() {
+                out[k * m + e] = x;
+            }
+        }
+        out
     }
 
     /// The model at `theta` with the linear parameters `coef`.

@@ -10,6 +10,7 @@ use common::*;
 use frf_data::{ChainModel, Estimator};
 use ml_refine::{MlError, MlRefine};
 use realize::{FrfModel, PolePair};
+use std::f64::consts::TAU;
 
 #[test]
 fn at_the_ml_optimum_it_reproduces_the_refinements_covariance() {
@@ -77,4 +78,53 @@ fn an_unstable_pole_is_refused_with_its_mode_named() {
         }
         other => panic!("expected an unstable-pole error, got {other:?}"),
     }
+}
+
+/// The response's standard deviation (`MlRefine::response_std_at`, the band of the
+/// report's plots): summed over every line and entry in units of the noise variance it
+/// is the number of parameters (the trace of the hat matrix), and over noise draws the
+/// spread of the fitted response around the truth matches it (pooled over lines and
+/// entries, 40 draws of 400 lines x 4 entries).
+#[test]
+fn the_response_std_matches_the_spread_of_the_fitted_response() {
+    let truth = system(11, 2, 2, 3, false, false);
+    let draws = 40;
+    let mut ratio_sum = 0.0;
+    let mut count = 0usize;
+    for s in 0..draws {
+        let d = data(&truth, 400, 1e-3, 300 + s);
+        let fit = MlRefine::default()
+            .estimate(&d, ChainModel::from(perturbed(&truth, 0.002, 0.1, s)))
+            .unwrap();
+        assert!(fit.convergence.is_converged(), "{:?}", fit.convergence);
+        let std = MlRefine::default().response_std_at(&d, &fit.model).unwrap();
+        let var = d.variances().unwrap();
+        assert_eq!(std.len(), var.len());
+        if s == 0 {
+            // the trace of the hat matrix: sum 2 w var(P) / scale = parameters
+            let rep = MlRefine::default().uncertainty_at(&d, &fit.model).unwrap();
+            let trace: f64 = std
+                .iter()
+                .zip(var)
+                .map(|(sd, v)| 2.0 * sd * sd / v)
+                .sum::<f64>()
+                / rep.covariance_scale;
+            println!("trace {trace:.6} for {} parameters", rep.n_params);
+            assert!(
+                (trace / rep.n_params as f64 - 1.0).abs() < 1e-6,
+                "trace {trace} vs {} parameters",
+                rep.n_params
+            );
+        }
+        let omega: Vec<f64> = d.freq_hz_slice().iter().map(|f| TAU * f).collect();
+        let p = fit.model.freq_response(&omega).unwrap();
+        let p0 = truth.freq_response(&omega).unwrap();
+        for ((a, b), sd) in p.values.iter().zip(&p0.values).zip(&std) {
+            ratio_sum += (a - b).norm_sqr() / (sd * sd);
+            count += 1;
+        }
+    }
+    let ratio = ratio_sum / count as f64;
+    println!("mean |P - P0|^2 / predicted variance over {count} values: {ratio:.4}");
+    assert!((0.85..1.15).contains(&ratio), "{ratio}");
 }

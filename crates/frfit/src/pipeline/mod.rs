@@ -192,6 +192,10 @@ pub struct PipelineOutput {
     pub initial_response: ResponseGrid,
     /// Response of the final model.
     pub final_response: ResponseGrid,
+    /// Standard deviation of the final model's response per line and entry (layout
+    /// `[k * m + e]`) from the parameters' covariance, when the final analysis ran and a
+    /// covariance could be formed (the band on the report's plots).
+    pub final_response_std: Option<Vec<f64>>,
     /// Per step, the model response before and after.
     pub step_responses: Vec<(ResponseGrid, ResponseGrid)>,
     /// The summary (also written as `summary.json`).
@@ -301,6 +305,7 @@ impl PipelineOutput {
             peaks: &self.peaks,
             initial: &self.initial_response,
             final_model: &self.final_response,
+            final_model_std: self.final_response_std.as_deref(),
             steps: &self.step_responses,
             title,
         })
@@ -502,6 +507,23 @@ pub fn run(
         },
     };
     timings.stage("uncertainty", t);
+    // the response's standard deviation for the report's plots (only when it is
+    // written: at 50 x 50 entries it costs a pass over the data)
+    let final_response_std = if cfg.final_analysis && uncertainty.is_some() {
+        let t = Instant::now();
+        let s = summarize::response_std(&ctx, &fit.model);
+        timings.stage("response uncertainty", t);
+        match s {
+            Ok(s) => Some(s),
+            Err(why) => {
+                fit.messages
+                    .push(format!("no uncertainty band for the final response: {why}"));
+                None
+            }
+        }
+    } else {
+        None
+    };
     timings.stage("total", t0);
     let summary = build_summary(
         &ctx,
@@ -542,6 +564,7 @@ pub fn run(
         initial_model,
         initial_response,
         final_response,
+        final_response_std,
         step_responses,
         summary,
     })

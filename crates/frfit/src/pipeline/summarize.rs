@@ -412,6 +412,22 @@ pub(crate) fn information_uncertainty(
     Ok(uncertainty_summary(INFORMATION_METHOD, &r))
 }
 
+/// The standard deviation of `model`'s response at the band's lines and entries
+/// (layout `[k * m + e]`) from the information of the ML criterion at it (the band on
+/// the report's plots, [`ml_refine::MlRefine::response_std_at`]); the error in words
+/// when no covariance can be formed.
+pub(crate) fn response_std(ctx: &FitContext, model: &AdditiveModel) -> Result<Vec<f64>, String> {
+    use frf_data::ModelStructure;
+    let fm = model.to_frf_model().map_err(|e| e.to_string())?;
+    ml_refine::MlRefine::new(ml_refine::MlConfig {
+        weighting: ctx.weighting.clone(),
+        realizations: ctx.declared.realizations,
+        ..Default::default()
+    })
+    .response_std_at(&ctx.band, &fm)
+    .map_err(|e| e.to_string())
+}
+
 /// The summary of a run on `ctx` with `cfg`.
 pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunRecord) -> Summary {
     let band = &ctx.band;
