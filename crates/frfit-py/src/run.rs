@@ -338,6 +338,8 @@ pub struct Diagnosis {
     out: PipelineOutput,
     model: Py<Model>,
     source: String,
+    /// The initial and the final model on the test records, when they were given.
+    test: Option<frfit::predict::TestRecordPredictions>,
 }
 
 #[pymethods]
@@ -346,6 +348,49 @@ impl Diagnosis {
     #[getter]
     fn model(&self, py: Python<'_>) -> Py<Model> {
         self.model.clone_ref(py)
+    }
+    /// The model before the diagnosis loop (the first fit, or `fit`'s model when the
+    /// diagnosis started again from it).
+    #[getter]
+    fn initial_model(&self) -> PyResult<Model> {
+        let band = self.out.summary.data.band_hz;
+        let provenance = additive_riv::Provenance {
+            data: Some(self.source.clone()),
+            frfit_version: format!(
+                "{} (frfit (python) diagnose, the model before the loop)",
+                env!("CARGO_PKG_VERSION")
+            ),
+            ..Default::default()
+        };
+        let file = additive_riv::ModelFile::from_model(
+            &self.out.initial_model,
+            self.out.band.units.clone(),
+            Some((band[0], band[1])),
+            provenance,
+        )
+        .map_err(|e| {
+            to_py(FrfitError::Fit {
+                what: "model file".into(),
+                why: e.to_string(),
+            })
+        })?;
+        Model::from_file(file, None, &self.source)
+    }
+    /// `(initial, final)`: the test records given to `diagnose(test_records=...)`
+    /// predicted by the model before the loop and by the final model (`Prediction`s:
+    /// NRMSE per output and the records' noise floor); `None` without test records.
+    #[getter]
+    fn test_predictions(&self) -> Option<(Prediction, Prediction)> {
+        self.test.as_ref().map(|t| {
+            (
+                Prediction {
+                    p: t.initial.clone(),
+                },
+                Prediction {
+                    p: t.final_model.clone(),
+                },
+            )
+        })
     }
     /// The steps of the loop, in order.
     #[getter]
@@ -382,17 +427,24 @@ impl Diagnosis {
     fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         to_python(py, &self.out.summary)
     }
-    /// Writes `report.md`, its SVG figures, `summary.json` and `model.json` into `dir`.
+    /// Writes `report.md`, its SVG figures, `summary.json` and `model.json` into `dir`;
+    /// with test records, also `test_records/initial/` and `final/` and a section of
+    /// `report.md` comparing the two models on them.
     fn report(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
         let out = &self.out;
         let source = &self.source;
-        py.detach(|| {
+        let test = &self.test;
+        py.detach(|| -> Result<(), FrfitError> {
             out.write_outputs(
                 &dir.join("model.json"),
                 Some(&dir),
                 Path::new(source),
                 "frfit (python) diagnose",
-            )
+            )?;
+            if let Some(t) = test {
+                t.write_into_report(&dir)?;
+            }
+            Ok(())
         })
         .map_err(to_py)
     }
@@ -412,10 +464,15 @@ impl Diagnosis {
 
 /// Fits `data` and traces the residual to effects the model lacks, as `frfit diagnose`
 /// does (the options of `fit`, plus `fs`: the sample rate to test a hold at, and
-/// `start`: a `Model` to start from instead of the first fit).
+/// `start`: a `Model` to start from instead of the first fit). `test_records=(u, y)`:
+/// periodic test records (shaped as for `frfit.nonparametric`, sampled at `fs`, else at
+/// the rate the data declare; `test_period` samples per period when the arrays do not
+/// say) that the initial and the final model predict, as `--test-records` does
+/// (`Diagnosis.test_predictions`, and a section of the report).
 #[pyfunction]
 #[pyo3(signature = (data, band=None, init=None, refine=None, hold=None, delay=None, modes=None,
-    method="riv", weighting="auto", frf_type="displacement", order=None, fs=None, start=None))]
+    method="riv", weighting="auto", frf_type="displacement", order=None, fs=None, start=None,
+    test_records=None, test_period=None))]
 pub fn diagnose(
     py: Python<'_>,
     data: &FrfData,
@@ -431,6 +488,8 @@ pub fn diagnose(
     order: Option<usize>,
     fs: Option<f64>,
     start: Option<&Model>,
+    test_records: Option<(Bound<'_, PyAny>, Bound<'_, PyAny>)>,
+    test_period: Option<usize>,
 ) -> PyResult<Diagnosis> {
     let mut spec = spec(
         band, init, refine, hold, delay, modes, method, weighting, frf_type, order, None, None,
@@ -449,13 +508,52 @@ pub fn diagnose(
         }
         cfg.start_model = Some(m.model.clone());
     }
+    // the test records are read (and their errors raised) before the diagnosis runs
+    let test_fs = fs.or(frfit::declared::declared(&data.inner).fs_hz);
+    let test = match &test_records {
+        Some((u, y)) => {
+            let fs = test_fs.ok_or_else(|| {
+                arg_err(
+                    "test_records",
+                    "given",
+                    "their sample rate is unknown: pass fs=... (or use data that declare it)",
+                )
+            })?;
+            let (experiments, period_of_arrays) = crate::data::experiments(py, u, y)?;
+            let spec = frfit::nonparametric::RecordSpec {
+                fs: Some(fs),
+                period: test_period.or(period_of_arrays),
+                // every record is compared on its own
+                realizations: Some(1),
+                ..Default::default()
+            };
+            Some(
+                py.detach(|| frfit::nonparametric::spectra_from_arrays(&experiments, &spec))
+                    .map_err(to_py)?,
+            )
+        }
+        None => None,
+    };
     let source = source_of(data);
     let frf = &data.inner;
-    let out = py
-        .detach(|| pipeline::run(frf, &source, &cfg, "diagnose"))
+    let (out, test) = py
+        .detach(|| -> Result<_, FrfitError> {
+            let out = pipeline::run(frf, &source, &cfg, "diagnose")?;
+            let test = test
+                .map(|s| {
+                    frfit::predict::TestRecordPredictions::of(&out, &s, "the test_records arrays")
+                })
+                .transpose()?;
+            Ok((out, test))
+        })
         .map_err(to_py)?;
     let model = Py::new(py, model_of(&out, &source, "frfit (python) diagnose")?)?;
-    Ok(Diagnosis { out, model, source })
+    Ok(Diagnosis {
+        out,
+        model,
+        source,
+        test,
+    })
 }
 
 /// The smallest model uncertainty per line against an independent validation

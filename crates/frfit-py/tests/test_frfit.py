@@ -414,6 +414,32 @@ def test_predict_scores_a_model_on_test_records_against_their_noise_floor(tmp_pa
     assert (tmp_path / "pred" / "prediction.svg").exists()
 
 
+def test_diagnose_predicts_test_records_with_the_initial_and_the_final_model(tmp_path):
+    u, y = _records(1)
+    est = frfit.nonparametric(u, y, fs=2000.0)
+    ut, yt = _records(2)  # records the diagnosis never saw
+    d = frfit.diagnose(est, fs=2000.0, test_records=(ut, yt))
+    initial, final = d.test_predictions
+    assert final.records == 3 and final.nrmse.shape == (2,)
+    # both models predict at the records' noise floor: nothing was missing
+    assert np.all(final.nrmse < 1.5 * final.noise_floor), (final.nrmse, final.noise_floor)
+    assert np.all(initial.nrmse < 1.5 * initial.noise_floor), initial.nrmse
+    # the same numbers as frfit.predict with each model
+    p = frfit.predict(d.model, ut, yt, fs=2000.0)
+    np.testing.assert_allclose(p.nrmse, final.nrmse, rtol=1e-12)
+    q = frfit.predict(d.initial_model, ut, yt, fs=2000.0)
+    np.testing.assert_allclose(q.nrmse, initial.nrmse, rtol=1e-12)
+    d.report(tmp_path / "rep")
+    md = (tmp_path / "rep" / "report.md").read_text()
+    assert "## Prediction of test records" in md
+    for which in ["initial", "final"]:
+        assert (tmp_path / "rep" / "test_records" / which / "prediction.json").exists()
+    assert frfit.diagnose(est, fs=2000.0).test_predictions is None
+    # records of another plant's shape are an error before the diagnosis runs
+    with pytest.raises(frfit.FrfitError):
+        frfit.diagnose(est, fs=2000.0, test_records=(ut, yt[:, :1]))
+
+
 def _frfit_binary():
     import pathlib
 

@@ -236,3 +236,75 @@ impl Prediction {
         self.plot(title).write_svg(dir.join("prediction.svg"))
     }
 }
+
+/// Test records predicted by a diagnosis's initial and final model (`frfit diagnose
+/// --test-records`, `frfit.diagnose(test_records=...)`): whether the diagnosis's changes
+/// earn their place on records the fit never saw.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TestRecordPredictions {
+    /// Where the records came from (file names, or a description of arrays).
+    pub source: String,
+    /// The model before the diagnosis loop on the records.
+    pub initial: Prediction,
+    /// The final model on the records.
+    pub final_model: Prediction,
+}
+
+impl TestRecordPredictions {
+    /// Both models of `out` on the test records `spectra` (from `source`).
+    pub fn of(
+        out: &crate::pipeline::PipelineOutput,
+        spectra: &PeriodicSpectra,
+        source: &str,
+    ) -> Result<Self, FrfitError> {
+        Ok(Self {
+            source: source.to_string(),
+            initial: predict_model(&out.initial_model, spectra)?,
+            final_model: predict_model(&out.fit.model, spectra)?,
+        })
+    }
+
+    /// Writes `report_dir/test_records/initial/` and `final/` (each as `frfit predict`
+    /// writes them) and appends a section to `report_dir/report.md` (which must exist:
+    /// write the report first) with the NRMSE per output of both models and the records'
+    /// noise floor.
+    pub fn write_into_report(&self, report_dir: &Path) -> Result<(), FrfitError> {
+        let dir = report_dir.join("test_records");
+        self.initial.write(
+            &dir.join("initial"),
+            &format!("initial model on the test records {}", self.source),
+        )?;
+        self.final_model.write(
+            &dir.join("final"),
+            &format!("final model on the test records {}", self.source),
+        )?;
+        let md_path = report_dir.join("report.md");
+        let mut md = std::fs::read_to_string(&md_path).map_err(|e| FrfitError::io(&md_path, e))?;
+        let last = &self.final_model;
+        md.push_str(&format!(
+            "\n## Prediction of test records\n\n\
+             The initial and the final model predict the periodic steady state of `{}` ({} \
+             record(s), {} periods, {} excited lines): NRMSE per output over the excited \
+             lines, and the records' own noise floor (the spread over periods).\n\n\
+             | output | initial NRMSE | final NRMSE | noise floor |\n|---|---|---|---|\n",
+            self.source,
+            last.records,
+            last.periods,
+            last.freq_hz.len()
+        ));
+        for (i, (a, b)) in self.initial.outputs.iter().zip(&last.outputs).enumerate() {
+            md.push_str(&format!(
+                "| {} | {:.4e} | {:.4e} | {} |\n",
+                i + 1,
+                a.nrmse,
+                b.nrmse,
+                b.noise_floor
+                    .map_or_else(|| "(one period)".to_string(), |f| format!("{f:.4e}"))
+            ));
+        }
+        md.push_str(
+            "\n![final model: measured, predicted and error spectra](test_records/final/prediction.svg)\n",
+        );
+        std::fs::write(&md_path, md).map_err(|e| FrfitError::io(&md_path, e))
+    }
+}

@@ -130,6 +130,8 @@ class Step:
 
 class Diagnosis:
     model: Model
+    initial_model: Model
+    test_predictions: Optional[Tuple[Prediction, Prediction]]
     steps: List[Step]
     verdict: str
     verdict_evidence: str
@@ -217,6 +219,8 @@ def diagnose(
     order: Optional[int] = None,
     fs: Optional[float] = None,
     start: Optional[Model] = None,
+    test_records: Optional[Tuple[npt.ArrayLike, npt.ArrayLike]] = None,
+    test_period: Optional[int] = None,
 ) -> Diagnosis: ...
 def validate(model: Model, data: FrfData, alpha: float = 0.99, method: str = "closed-form") -> Validation: ...
 def reduce(model: Model, order: Optional[int] = None) -> Reduction: ...

@@ -192,7 +192,7 @@ fn predict_test_records(
     quiet: bool,
 ) -> Result<(), FrfitError> {
     use frfit::nonparametric::{spectra_from_files, RecordSpec};
-    use frfit::predict::predict_model;
+    use frfit::predict::TestRecordPredictions;
     let spec = RecordSpec {
         inputs: args.test_input.clone(),
         outputs: args.test_output.clone(),
@@ -203,49 +203,14 @@ fn predict_test_records(
         ..RecordSpec::default()
     };
     let (spectra, _) = spectra_from_files(&args.test_records, &spec)?;
-    let dir = args.report.join("test_records");
-    let initial = predict_model(&out.initial_model, &spectra)?;
-    let last = predict_model(&out.fit.model, &spectra)?;
     let names: Vec<String> = args
         .test_records
         .iter()
         .map(|p| p.display().to_string())
         .collect();
-    initial.write(
-        &dir.join("initial"),
-        &format!("initial model on the test records {}", names.join(", ")),
-    )?;
-    last.write(
-        &dir.join("final"),
-        &format!("final model on the test records {}", names.join(", ")),
-    )?;
-    let md_path = args.report.join("report.md");
-    let mut md = std::fs::read_to_string(&md_path).map_err(|e| FrfitError::io(&md_path, e))?;
-    md.push_str(&format!(
-        "\n## Prediction of test records\n\n\
-         The initial and the final model predict the periodic steady state of `{}` ({} record(s), \
-         {} periods, {} excited lines): NRMSE per output over the excited lines, and the records' \
-         own noise floor (the spread over periods).\n\n\
-         | output | initial NRMSE | final NRMSE | noise floor |\n|---|---|---|---|\n",
-        names.join("`, `"),
-        last.records,
-        last.periods,
-        last.freq_hz.len()
-    ));
-    for (i, (a, b)) in initial.outputs.iter().zip(&last.outputs).enumerate() {
-        md.push_str(&format!(
-            "| {} | {:.4e} | {:.4e} | {} |\n",
-            i + 1,
-            a.nrmse,
-            b.nrmse,
-            b.noise_floor
-                .map_or_else(|| "(one period)".to_string(), |f| format!("{f:.4e}"))
-        ));
-    }
-    md.push_str(
-        "\n![final model: measured, predicted and error spectra](test_records/final/prediction.svg)\n",
-    );
-    std::fs::write(&md_path, md).map_err(|e| FrfitError::io(&md_path, e))?;
+    let p = TestRecordPredictions::of(out, &spectra, &names.join(", "))?;
+    p.write_into_report(&args.report)?;
+    let (initial, last) = (&p.initial, &p.final_model);
     if !quiet {
         for (i, (a, b)) in initial.outputs.iter().zip(&last.outputs).enumerate() {
             println!(

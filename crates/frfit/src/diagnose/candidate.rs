@@ -743,6 +743,17 @@ fn response_share(model: &AdditiveModel, sub: &additive_riv::Submodel, omega: f6
 /// it is what the data show of the body at the bottom of the band.
 const BODY_SHARE: f64 = 0.5;
 
+/// A mode below the suspension candidate of [`suspended_body`] that carries more than
+/// this fraction of the candidate's share of the lowest line is a flexible mode below
+/// it, not a weak duplicate of the first fit: there is no suspended body.
+const DUPLICATE_SHARE: f64 = 0.2;
+
+/// The suspended-body reading ([`suspended_body`]) applies to a mode at most this many
+/// times the lowest line's frequency: above, the data show the mode's static
+/// compliance flat over more than a decade below it, not a body a first fit could take
+/// for a free one.
+const SUSPENSION_MAX_OVER_LOWEST_LINE: f64 = 20.0;
+
 /// The suspended-body reading of `model`: a body on a suspension whose frequency lies
 /// in the band is, to a first fit that declares a free rigid body, a low mode with the
 /// body's response below it (the body's static compliance `R / w_s^2` instead of the
@@ -769,7 +780,7 @@ pub fn suspended_body(model: &AdditiveModel, omega_low: f64) -> Option<Proposal>
     }
     // the mode that carries the lowest line (not merely the lowest one: a first fit can
     // put a weak duplicate just below it)
-    let (low, mode_share) = model
+    let shares: Vec<_> = model
         .modes()
         .into_iter()
         .filter(|m| m.zeta > 0.0)
@@ -777,9 +788,34 @@ pub fn suspended_body(model: &AdditiveModel, omega_low: f64) -> Option<Proposal>
             let share = response_share(model, &model.submodels[m.submodel], omega_low);
             (m, share)
         })
-        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+        .collect();
+    let (low, mode_share) = shares
+        .iter()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(m, s)| (*m, *s))?;
     let rb_share = response_share(model, rb, omega_low);
     if !(mode_share >= BODY_SHARE && rb_share <= 0.5 * mode_share) {
+        return None;
+    }
+    // A suspension is the body's lowest resonance: the flexible modes lie above it. A
+    // mode below the candidate that carries more than a weak duplicate's share of the
+    // lowest line makes the reading a structure's static compliance (the sum of its
+    // modes' `R / w^2`, largest for a stiff high mode) rather than a suspended body: the
+    // simulated piezo mechanism (no free body, modes 635-2770 Hz) had its 2770 Hz mode
+    // read as a suspension beside a free rigid body of the first fit that carried 0.06 %
+    // of its cost, and ended with 4 modes for 5.
+    if shares
+        .iter()
+        .any(|(m, s)| m.f_hz < low.f_hz && *s > DUPLICATE_SHARE * mode_share)
+    {
+        return None;
+    }
+    // Lines far below the mode show its flat static compliance over decades, which no
+    // free body has: a first fit had no reason to take a free body there, and the
+    // "suspension" would be a mode under another name (the piezo mechanism on another
+    // seed: its 635 Hz mode, lines from 0.78 Hz, again beside a free body of 0.03 % of
+    // the cost). The tested suspensions lie at 0.4 to 8 times the lowest line.
+    if low.f_hz > SUSPENSION_MAX_OVER_LOWEST_LINE * omega_low / std::f64::consts::TAU {
         return None;
     }
     let evidence = format!(
