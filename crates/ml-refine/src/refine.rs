@@ -491,7 +491,7 @@ impl MlRefine {
                 .modal
                 .real_poles
                 .iter()
-                .filter(|p| !(p.pole < 0.0))
+                .filter(|p| p.pole >= 0.0 || p.pole.is_nan())
                 .map(|p| format!("real pole at {:.3e} rad/s", p.pole)),
         );
         if !bad.is_empty() {
