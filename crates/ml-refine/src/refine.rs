@@ -376,6 +376,27 @@ const GROUP_PEAK_OVER_MEDIAN: f64 = 20.0;
 /// Lines either side within which a residual peak must be the largest.
 const GROUP_PEAK_HALF_WINDOW: usize = 5;
 
+/// The projected problem of a model on the data ([`MlRefine::projected`]).
+struct Projected {
+    prob: Problem,
+    lay: Layout,
+    /// The model's nonlinear parameters.
+    theta: Vec<f64>,
+    /// The linear parameters and the cost at `theta`.
+    ev: crate::varpro::Eval,
+    weighting: Weighting,
+    /// Whether the weights are the measured variance's.
+    measured: bool,
+    /// Lines.
+    n: usize,
+    /// Entries.
+    m: usize,
+    /// Real parameters (nonlinear and linear).
+    n_params: usize,
+    /// The weights per line and entry (`w`, the problem holds `sqrt(2 w)`).
+    w: Vec<f64>,
+}
+
 /// The information of the ML criterion at a given estimate ([`MlRefine::information_at`]).
 struct Information {
     /// The projected problem at the estimate's structure.
@@ -462,6 +483,76 @@ impl MlRefine {
         }
     }
 
+    /// The projected problem of `model` on `data` under these settings: the weighting
+    /// (and whether it is the measured variance's), the layout, the nonlinear parameters
+    /// and the linear parameters' fit at them ([`Problem::evaluate`]). `what` names the
+    /// model in errors (`model`, `start model`), `at` where it is in the message of a
+    /// dependent linear term (` at the start`). Errors: no terms, too few data for the
+    /// parameters, a linear term that is a combination of the others.
+    fn projected<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        model: &FrfModel,
+        what: &str,
+        at: &str,
+    ) -> Result<Projected, MlError> {
+        let weighting = self.config.weighting.resolve(data);
+        let measured = matches!(weighting, Weighting::InverseVariance);
+        let w = weighting.weights(data)?;
+        let sw: Vec<f64> = w.iter().map(|x| (2.0 * x).sqrt()).collect();
+        let lay = self.layout_of(model);
+        let (n, m) = (data.n_lines(), lay.m());
+        let n_params = lay.n_nl() + m * lay.n_lin();
+        if lay.n_lin() == 0 {
+            return Err(MlError::invalid(
+                what,
+                "no terms",
+                "the model has no poles, rigid body or feedthrough",
+            ));
+        }
+        if 2 * n < lay.n_lin() + lay.n_nl() + 1 || 2 * n * m <= n_params {
+            return Err(MlError::TooFewData {
+                observations: 2 * n * m,
+                params: n_params,
+            });
+        }
+        let theta = nonlinear_start(model, &lay);
+        let prob = Problem::new(
+            lay.clone(),
+            data.omegas(),
+            data.values_vec(),
+            sw,
+            model.clone(),
+        );
+        let ev = prob.evaluate(&theta).map_err(|s| MlError::Unidentifiable {
+            what: format!(
+                "linear term {} of entry ({}, {}){at} (it is a combination of the others to {:.1e})",
+                s.column,
+                s.entry % lay.ny + 1,
+                s.entry / lay.ny + 1,
+                s.ratio
+            ),
+            condition: if s.ratio > 0.0 {
+                1.0 / s.ratio
+            } else {
+                f64::INFINITY
+            },
+            hint: "drop one of two coinciding poles, or a rigid-body or feedthrough term the band does not show".into(),
+        })?;
+        Ok(Projected {
+            prob,
+            lay,
+            theta,
+            ev,
+            weighting,
+            measured,
+            n,
+            m,
+            n_params,
+            w,
+        })
+    }
+
     /// The information of the ML criterion at `model` (see [`MlRefine::uncertainty_at`]):
     /// the projected problem at its poles, the unscaled covariance of the nonlinear
     /// parameters, the cost test and the covariance scale; the same checks and errors.
@@ -500,51 +591,18 @@ impl MlRefine {
                 hint: "a covariance is formed at a stable estimate only".into(),
             });
         }
-        let weighting = cfg.weighting.resolve(data);
-        let measured = matches!(weighting, Weighting::InverseVariance);
-        let w = weighting.weights(data)?;
-        let sw: Vec<f64> = w.iter().map(|x| (2.0 * x).sqrt()).collect();
-        let lay = self.layout_of(model);
-        let (n, m) = (data.n_lines(), lay.m());
-        let n_params = lay.n_nl() + m * lay.n_lin();
-        if lay.n_lin() == 0 {
-            return Err(MlError::invalid(
-                "model",
-                "no terms",
-                "the model has no poles, rigid body or feedthrough",
-            ));
-        }
-        if 2 * n < lay.n_lin() + lay.n_nl() + 1 || 2 * n * m <= n_params {
-            return Err(MlError::TooFewData {
-                observations: 2 * n * m,
-                params: n_params,
-            });
-        }
-        let theta = nonlinear_start(model, &lay);
-        let prob = Problem::new(
-            lay.clone(),
-            data.omegas(),
-            data.values_vec(),
-            sw,
-            model.clone(),
-        );
-        let ev = prob.evaluate(&theta).map_err(|s| MlError::Unidentifiable {
-            what: format!(
-                "linear term {} of entry ({}, {}) (it is a combination of the others to {:.1e})",
-                s.column,
-                s.entry % lay.ny + 1,
-                s.entry / lay.ny + 1,
-                s.ratio
-            ),
-            condition: if s.ratio > 0.0 {
-                1.0 / s.ratio
-            } else {
-                f64::INFINITY
-            },
-            hint:
-                "two coinciding poles, or a rigid-body or feedthrough term the band does not show"
-                    .into(),
-        })?;
+        let Projected {
+            prob,
+            lay,
+            theta,
+            ev,
+            weighting,
+            measured,
+            n,
+            m,
+            n_params,
+            w: _,
+        } = self.projected(data, model, "model", "")?;
         let (r, vnorm) = prob.jacobian_r(&theta, &ev);
         let dof = (n * m) as f64 - n_params as f64 / 2.0;
         let cost = ev.cost;
@@ -764,46 +822,19 @@ impl MlRefine {
                 p.pole = -p.pole.abs().max(1e-9);
             }
         }
-        let weighting = cfg.weighting.resolve(data);
-        let measured = matches!(weighting, Weighting::InverseVariance);
-        let w = weighting.weights(data)?;
-        let sw: Vec<f64> = w.iter().map(|x| (2.0 * x).sqrt()).collect();
-        let lay = self.layout_of(&model);
+        let Projected {
+            prob,
+            lay,
+            theta,
+            ev: eval0,
+            weighting,
+            measured,
+            n,
+            m,
+            n_params,
+            w,
+        } = self.projected(data, &model, "start model", " at the start")?;
         let const_num = lay.const_num;
-        let (n, m) = (data.n_lines(), lay.m());
-        let n_params = lay.n_nl() + m * lay.n_lin();
-        if lay.n_lin() == 0 {
-            return Err(MlError::invalid(
-                "start model",
-                "no terms",
-                "the model has no poles, rigid body or feedthrough to refine",
-            ));
-        }
-        if 2 * n < lay.n_lin() + lay.n_nl() + 1 || 2 * n * m <= n_params {
-            return Err(MlError::TooFewData {
-                observations: 2 * n * m,
-                params: n_params,
-            });
-        }
-        let theta = nonlinear_start(&model, &lay);
-        let prob = Problem::new(
-            lay.clone(),
-            data.omegas(),
-            data.values_vec(),
-            sw,
-            model.clone(),
-        );
-        let eval0 = prob.evaluate(&theta).map_err(|s| MlError::Unidentifiable {
-            what: format!(
-                "linear term {} of entry ({}, {}) at the start (it is a combination of the others to {:.1e})",
-                s.column,
-                s.entry % lay.ny + 1,
-                s.entry / lay.ny + 1,
-                s.ratio
-            ),
-            condition: if s.ratio > 0.0 { 1.0 / s.ratio } else { f64::INFINITY },
-            hint: "drop one of two coinciding poles, or a rigid-body or feedthrough term the band does not show".into(),
-        })?;
         if measured && cfg.prune_real_poles && !model.modal.real_poles.is_empty() {
             // a start real pole that explains less than `min_f` times the noise per
             // parameter (the residues of every entry and the pole) is dropped before the
