@@ -639,20 +639,40 @@ struct GridLayout {
 }
 
 /// Lays out the entries of an `ny x nu` plant (see the module documentation).
+/// The entries (`e = j * ny + i`) the Bode grid shows of a plant with more than
+/// [`MAX_GRID_PANELS`] entries: the [`GRID_SUBSET`] with the largest `score`, in
+/// output-then-input order.
+fn grid_subset(ny: usize, nu: usize, score: &[f64]) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..ny * nu).collect();
+    let s = |e: usize| {
+        score
+            .get(e)
+            .copied()
+            .filter(|v| v.is_finite())
+            .unwrap_or(-1.0)
+    };
+    idx.sort_by(|a, b| s(*b).total_cmp(&s(*a)));
+    idx.truncate(GRID_SUBSET);
+    idx.sort_by_key(|e| (e % ny, e / ny));
+    idx
+}
+
+/// The entries (`e = j * ny + i`) the report's figures show of `model` against `data`
+/// (with the noise variance `var`): every entry up to [`MAX_GRID_PANELS`], else the Bode
+/// grid's subset, which holds the entry plot's worst entry. What the model's band needs
+/// to be computed for.
+pub fn plotted_entries(data: &Frf, model: &ResponseGrid, var: Option<&[f64]>) -> Vec<usize> {
+    let (ny, nu) = (data.ny(), data.nu());
+    if ny * nu <= MAX_GRID_PANELS {
+        return (0..ny * nu).collect();
+    }
+    grid_subset(ny, nu, &Residual::new(data, model, var).per_entry)
+}
+
 fn grid_layout(ny: usize, nu: usize, score: &[f64]) -> GridLayout {
     let n = ny * nu;
     if n > MAX_GRID_PANELS {
-        let mut idx: Vec<usize> = (0..n).collect();
-        let s = |e: usize| {
-            score
-                .get(e)
-                .copied()
-                .filter(|v| v.is_finite())
-                .unwrap_or(-1.0)
-        };
-        idx.sort_by(|a, b| s(*b).total_cmp(&s(*a)));
-        idx.truncate(GRID_SUBSET);
-        idx.sort_by_key(|e| (e % ny, e / ny));
+        let idx = grid_subset(ny, nu, score);
         let cols = 8;
         let rows = idx.len().div_ceil(cols);
         let mut cells: Vec<Option<(usize, usize)>> =

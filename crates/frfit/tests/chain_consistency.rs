@@ -303,6 +303,10 @@ proptest! {
     /// 3.8e-9 against 1.2e-9, bring into the subspace start, and the maximum-likelihood
     /// refiner keeps the start's rigid-body structure; the refined-IV refiner chooses
     /// it again, see [`refined_iv_chooses_the_rigid_body_of_another_start_again`]).
+    /// Seed 6809 through the hold fails the same way for `subspace+ml` (2.1e-6; met by a
+    /// random run on 2026-12-06, before and after that day's changes to the ML refiner
+    /// alike): the property holds for about 999 of 1000 systems, and a run of 6 cases
+    /// meets such a system about once in 100 runs.
     #[test]
     fn noise_free_data_with_7_or_8_modes_are_recovered(seed in 0u64..10_000, hold in any::<bool>()) {
         recovers_noise_free_spread(&chains(false), seed, hold, MANY_MODES)?;

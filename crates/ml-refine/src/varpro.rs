@@ -683,8 +683,15 @@ impl Problem {
     /// (`M = B^T B`, `C = D^T B`): the projected Jacobian's row through the poles'
     /// covariance and the leverage of the linear fit. Summed over every line and entry,
     /// weighted by `2 w`, it is the number of parameters (the trace of the hat matrix).
-    /// Multiply by the noise scale ([`crate::MlReport::covariance_scale`]).
-    pub fn response_variance(&self, theta: &[f64], ev: &Eval, cov: &[f64]) -> Vec<f64> {
+    /// Multiply by the noise scale ([`crate::MlReport::covariance_scale`]). Only the
+    /// entries in `entries` are computed (all with `None`); the others are NaN.
+    pub fn response_variance(
+        &self,
+        theta: &[f64],
+        ev: &Eval,
+        cov: &[f64],
+        entries: Option<&[usize]>,
+    ) -> Vec<f64> {
         use faer::linalg::matmul::matmul;
         use faer::linalg::solvers::Solve;
         use faer::{Accum, Mat, Par, Side};
@@ -695,9 +702,13 @@ impl Problem {
         let rows = 2 * n;
         let cols = n_lin + n_nl + 1;
         let covm = Mat::from_fn(n_nl, n_nl, |i, j| cov[j * n_nl + i]);
-        let per: Vec<Vec<f64>> = (0..m)
-            .into_par_iter()
-            .map_init(Vec::new, |buf: &mut Vec<f64>, e| {
+        let wanted: Vec<usize> = match entries {
+            Some(list) => list.iter().copied().filter(|&e| e < m).collect(),
+            None => (0..m).collect(),
+        };
+        let per: Vec<Vec<f64>> = wanted
+            .par_iter()
+            .map_init(Vec::new, |buf: &mut Vec<f64>, &e| {
                 buf.resize(rows * cols, 0.0);
                 let a = &mut buf[..];
                 self.fill_basis(&lines, e, a, cols, n_lin + n_nl);
@@ -763,8 +774,8 @@ impl Problem {
                     .collect()
             })
             .collect();
-        let mut out = vec![0.0; n * m];
-        for (e, v) in per.into_iter().enumerate() {
+        let mut out = vec![f64::NAN; n * m];
+        for (&e, v) in wanted.iter().zip(per) {
             for (k, x) in v.into_iter().enumerate() {
                 out[k * m + e] = x;
             }

@@ -97,9 +97,22 @@ fn the_response_std_matches_the_spread_of_the_fitted_response() {
             .estimate(&d, ChainModel::from(perturbed(&truth, 0.002, 0.1, s)))
             .unwrap();
         assert!(fit.convergence.is_converged(), "{:?}", fit.convergence);
-        let std = MlRefine::default().response_std_at(&d, &fit.model).unwrap();
+        let std = MlRefine::default()
+            .response_std_at(&d, &fit.model, None)
+            .unwrap();
         let var = d.variances().unwrap();
         assert_eq!(std.len(), var.len());
+        // a subset of entries: the same values there, NaN elsewhere
+        let some = MlRefine::default()
+            .response_std_at(&d, &fit.model, Some(&[1, 2]))
+            .unwrap();
+        for (i, (a, b)) in some.iter().zip(&std).enumerate() {
+            if matches!(i % 4, 1 | 2) {
+                assert_eq!(a, b);
+            } else {
+                assert!(a.is_nan());
+            }
+        }
         if s == 0 {
             // the trace of the hat matrix: sum 2 w var(P) / scale = parameters
             let rep = MlRefine::default().uncertainty_at(&d, &fit.model).unwrap();

@@ -511,7 +511,10 @@ pub fn run(
     // written: at 50 x 50 entries it costs a pass over the data)
     let final_response_std = if cfg.final_analysis && uncertainty.is_some() {
         let t = Instant::now();
-        let s = summarize::response_std(&ctx, &fit.model);
+        // the entries the report's figures show (all up to 60, else 48 of them)
+        let entries =
+            crate::report::plotted_entries(&ctx.band, &final_response, Some(&ctx.noise.variance));
+        let s = summarize::response_std(&ctx, &fit.model, &entries);
         timings.stage("response uncertainty", t);
         match s {
             Ok(s) => Some(s),

@@ -416,7 +416,11 @@ pub(crate) fn information_uncertainty(
 /// (layout `[k * m + e]`) from the information of the ML criterion at it (the band on
 /// the report's plots, [`ml_refine::MlRefine::response_std_at`]); the error in words
 /// when no covariance can be formed.
-pub(crate) fn response_std(ctx: &FitContext, model: &AdditiveModel) -> Result<Vec<f64>, String> {
+pub(crate) fn response_std(
+    ctx: &FitContext,
+    model: &AdditiveModel,
+    entries: &[usize],
+) -> Result<Vec<f64>, String> {
     use frf_data::ModelStructure;
     let fm = model.to_frf_model().map_err(|e| e.to_string())?;
     ml_refine::MlRefine::new(ml_refine::MlConfig {
@@ -424,7 +428,7 @@ pub(crate) fn response_std(ctx: &FitContext, model: &AdditiveModel) -> Result<Ve
         realizations: ctx.declared.realizations,
         ..Default::default()
     })
-    .response_std_at(&ctx.band, &fm)
+    .response_std_at(&ctx.band, &fm, Some(entries))
     .map_err(|e| e.to_string())
 }
 
