@@ -692,17 +692,7 @@ impl MlRefine {
         let (delay_s, delay_s_std) = match lay.delay_index() {
             Some(i) => {
                 let fisher = c(i, i).max(0.0).sqrt();
-                let profile = delay_profile(&prob, &theta, i, (cost, scale), fisher);
-                let std = if profile.half_width > 1.5 * fisher {
-                    messages.push(format!(
-                        "the delay's profile is flatter than its curvature: reported {:.3} us (profile) for {:.3} us (information matrix)",
-                        profile.half_width * 1e6,
-                        fisher * 1e6
-                    ));
-                    profile.half_width
-                } else {
-                    fisher
-                };
+                let (std, _) = delay_std(&prob, &theta, i, (cost, scale), fisher, &mut messages);
                 (Some(theta[i]), Some(std))
             }
             None => (None, None),
@@ -1351,18 +1341,14 @@ impl MlRefine {
         let (delay_s, delay_s_std) = match lay.delay_index() {
             Some(i) => {
                 let fisher = c(i, i).max(0.0).sqrt();
-                let profile = delay_profile(&prob, &out.theta, i, (out.eval.cost, scale), fisher);
-                let mut delay_std = fisher;
-                if profile.half_width > 1.5 * fisher {
-                    delay_std = profile.half_width;
-                    messages.push(format!(
-                        "the delay's profile is flatter than its curvature says: the cost (poles held) rises by 1/2 only {:.3} us from the optimum{}, where the information matrix gives a standard deviation of {:.3} us; reported: {:.3} us (with complex residues and a feedthrough a delay trades with the residues' phases to first order)",
-                        profile.half_width * 1e6,
-                        if profile.reached { "" } else { " (at least: not reached)" },
-                        fisher * 1e6,
-                        delay_std * 1e6
-                    ));
-                }
+                let (delay_std, profile) = delay_std(
+                    &prob,
+                    &out.theta,
+                    i,
+                    (out.eval.cost, scale),
+                    fisher,
+                    &mut messages,
+                );
                 if let Some((d, c)) = profile.lower {
                     messages.push(format!(
                         "the cost (poles held) is lower {:.3} us from the returned delay ({:.6e} against {:.6e}): the refinement stopped short of the delay's optimum, where the cost is nearly flat in it",
@@ -1651,6 +1637,31 @@ struct DelayProfile {
 /// are lower bounds of those of the full profile. Near a quadratic optimum they equal
 /// the standard deviation of the information matrix; where the delay trades with other
 /// parameters to first order the profile is flatter (quartic) and wider.
+/// The delay's reported standard deviation: the information matrix's `fisher`, or the
+/// half width of its profile ([`delay_profile`]) when that is over 1.5 times larger,
+/// with a message in `messages` saying so; and the profile.
+fn delay_std(
+    prob: &Problem,
+    theta: &[f64],
+    i: usize,
+    (cost, scale): (f64, f64),
+    fisher: f64,
+    messages: &mut Vec<String>,
+) -> (f64, DelayProfile) {
+    let profile = delay_profile(prob, theta, i, (cost, scale), fisher);
+    if profile.half_width <= 1.5 * fisher {
+        return (fisher, profile);
+    }
+    messages.push(format!(
+        "the delay's profile is flatter than its curvature says: the cost (poles held) rises by 1/2 only {:.3} us from the estimate{}, where the information matrix gives a standard deviation of {:.3} us; reported: {:.3} us (with complex residues and a feedthrough a delay trades with the residues' phases to first order)",
+        profile.half_width * 1e6,
+        if profile.reached { "" } else { " (at least: not reached)" },
+        fisher * 1e6,
+        profile.half_width * 1e6
+    ));
+    (profile.half_width, profile)
+}
+
 fn delay_profile(
     prob: &Problem,
     theta: &[f64],
