@@ -401,11 +401,7 @@ pub(crate) fn information_uncertainty(
 ) -> Result<UncertaintySummary, String> {
     use frf_data::ModelStructure;
     let fm = model.to_frf_model().map_err(|e| e.to_string())?;
-    let ml = ml_refine::MlRefine::new(ml_refine::MlConfig {
-        weighting: ctx.weighting.clone(),
-        realizations: ctx.declared.realizations,
-        ..Default::default()
-    });
+    let ml = information_refiner(ctx);
     let r = ml
         .uncertainty_at(&ctx.band, &fm)
         .map_err(|e| e.to_string())?;
@@ -423,13 +419,19 @@ pub(crate) fn response_std(
 ) -> Result<Vec<f64>, String> {
     use frf_data::ModelStructure;
     let fm = model.to_frf_model().map_err(|e| e.to_string())?;
+    information_refiner(ctx)
+        .response_std_at(&ctx.band, &fm, Some(entries))
+        .map_err(|e| e.to_string())
+}
+
+/// The ML refiner whose criterion the information at a final model is formed of: the
+/// fit's weighting and the data's stated realizations (the cost test's expectation).
+fn information_refiner(ctx: &FitContext) -> ml_refine::MlRefine {
     ml_refine::MlRefine::new(ml_refine::MlConfig {
         weighting: ctx.weighting.clone(),
         realizations: ctx.declared.realizations,
         ..Default::default()
     })
-    .response_std_at(&ctx.band, &fm, Some(entries))
-    .map_err(|e| e.to_string())
 }
 
 /// The summary of a run on `ctx` with `cfg`.
