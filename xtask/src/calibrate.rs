@@ -22,7 +22,8 @@ use crate::{Context, Error};
 use clap::Args as ClapArgs;
 use experiment::synth::{RandomModal, RandomModalConfig};
 use frf_data::{Frf, C64};
-use frfit::pipeline::{self, PipelineConfig};
+use frfit::pipeline::PipelineConfig;
+use frfit::run;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use std::time::Instant;
@@ -159,7 +160,7 @@ pub fn run(a: Args) -> Result<(), Error> {
                 final_analysis: false,
                 ..PipelineConfig::default()
             };
-            let out = pipeline::run(&data, "calibrate", &pc, "fit").stage("fit")?;
+            let out = run::run(&data, "calibrate", &pc, "fit").stage("fit")?;
             tally.add(&out.summary, &truth, 0.0);
             eprint!("\r{plant}: draw {}/{}", d + 1, a.draws);
         }
@@ -294,7 +295,7 @@ fn wafer(a: &Args) -> Result<(), Error> {
             band_hz: Some((20.0, 2000.0)),
             ..PipelineConfig::default()
         };
-        let out = pipeline::run(&est.frf, "calibrate", &pc, "fit").stage("fit")?;
+        let out = run::run(&est.frf, "calibrate", &pc, "fit").stage("fit")?;
         tally.add(&out.summary, &truth, delay_truth);
         eprint!("\rwafer: draw {}/{}", d + 1, a.draws);
     }

@@ -22,8 +22,9 @@ use frf_data::truth::Truth;
 use frf_data::ModelStructure;
 use frf_data::{FrfDataset, ProgressSink};
 use frfit::additive_riv::{Hold, ModelFile};
-use frfit::pipeline::{self, PipelineConfig, PipelineOutput};
+use frfit::pipeline::PipelineConfig;
 use frfit::report::write_report;
+use frfit::run::{self, PipelineOutput};
 use frfit::validation::{validate_frf, FrfValidationConfig};
 use frfit::validation_report::{verdict_text, write_validation_dir};
 use std::path::{Path, PathBuf};
@@ -249,7 +250,7 @@ pub fn run(args: Args) -> Result<(), Error> {
             data.freq_hz(0),
             data.freq_hz(data.n_lines() - 1)
         ),
-        || pipeline::run(&data, DATA_NAME, &cfg, "diagnose").stage("pipeline"),
+        || run::run(&data, DATA_NAME, &cfg, "diagnose").stage("pipeline"),
     )?;
 
     // 4. model.json, report.md, figures, summary.json

@@ -33,7 +33,7 @@ fn load_band() -> Option<Frf> {
 }
 
 /// The fitter settings of `frfit fit DATA --band 20:2000 --hold zoh:10000` (see
-/// `frfit::pipeline::run`: no diagnosis, so the delay is estimated and refined and the
+/// `frfit::run::run`: no diagnosis, so the delay is estimated and refined and the
 /// adaptation may add up to 6 modes per round); `adapt = false` leaves the adaptation out.
 fn cli_config(adapt: bool) -> FitterConfig {
     FitterConfig {

@@ -10,8 +10,7 @@
 //!   and known factors) with the numerators of eq. (24).
 
 use crate::complete::{complete_start, merge_coincident_peaks, CompleteConfig, CompleteReport};
-use crate::fitter::{check_fs, choose_rigid_body};
-use crate::init::{initial_model, InitConfig, RigidBody};
+use crate::init::{check_fs, choose_rigid_body, initial_model, InitConfig, RigidBody};
 use crate::numerators::fit_numerators;
 use crate::riv::{iterate, RivConfig};
 use crate::structure::{adapt_modes, AdaptConfig, AdaptReport};
@@ -247,7 +246,7 @@ impl Estimator for CmifInit {
             )?;
             init.model = model;
             init.cost_history
-                .push(crate::complete::cost_of(&init.model, &fd) / (2.0 * fd.n as f64));
+                .push(crate::residual_stats::cost_of(&init.model, &fd) / (2.0 * fd.n as f64));
             init.messages.push(format!(
                 "start completed ({} iterations of Algorithm 1 at a coarse tolerance): {}{}",
                 rep.iterations,

@@ -36,7 +36,10 @@
 //!    kept mode.
 
 use crate::mode_scan::{scan_residual, ScanConfig};
-use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
+use crate::problem::FitData;
+use crate::residual_stats::{
+    has_duplicate, line_spacing_near, model_cost, significant_off_peak, EXACT_FIT_REL,
+};
 use crate::riv::{iterate, RivConfig};
 use crate::significance::{f_critical, f_statistic, noise_scale, submodel_cost_increase};
 use crate::{fit_numerators, AdditiveModel, Domain, RivError, SubmodelKind};
@@ -146,15 +149,6 @@ impl Default for CompleteConfig {
     }
 }
 
-/// A weighted cost at or below this fraction of the data's weighted energy (a
-/// relative misfit of 1e-7 rms, far below any measured noise) is an exact fit of
-/// noise-free data up to what the refiner finishes: [`complete_start`] adds no mode to
-/// it. The F statistic's noise scale, estimated from such a residual, is round-off and
-/// the conditioning of the numerator problem: on a noise-free 2-mode system (the chain
-/// harness's seed 8401) modes were added beside the true ones on costs of 1e-15 and
-/// the maximum-likelihood refiner then found the duplicates unidentifiable.
-pub const EXACT_FIT_REL: f64 = 1e-14;
-
 /// What [`complete_start`] changed.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct CompleteReport {
@@ -196,19 +190,6 @@ pub fn merge_coincident_peaks(peaks: &[CmifPeak], fraction: f64, zeta0: f64) -> 
     let mut f: Vec<f64> = kept.iter().map(|p| p.f_hz).collect();
     f.sort_by(|a, b| a.total_cmp(b));
     f
-}
-
-/// The weighted cost `sum w |E|^2` of `model` on `data`, with the residual `E` when asked.
-fn model_cost(model: &AdditiveModel, data: &FitData, resid: Option<&mut Vec<C64>>) -> f64 {
-    let lay = Layout::of(model);
-    let basis = Basis::new(model, &lay, &data.omega);
-    let (_, eta) = pack(model, &lay);
-    cost(data, &lay, &basis, &eta, resid, &groups(model, &lay))
-}
-
-/// The weighted cost `sum w |E|^2` of `model` on `data`.
-pub fn cost_of(model: &AdditiveModel, data: &FitData) -> f64 {
-    model_cost(model, data, None)
 }
 
 /// Settles the poles of `model` by Algorithm 1 at the coarse tolerance; `None` when the
@@ -440,25 +421,9 @@ fn prune_insignificant(
     cur
 }
 
-/// True when two modes of `model` sit on practically one pole (closer than
-/// [`crate::structure::DUPLICATE_FRACTION`] of their mean `|Re p|`): not identifiable.
-pub(crate) fn has_duplicate(model: &AdditiveModel) -> bool {
-    let poles: Vec<C64> = model
-        .submodels
-        .iter()
-        .filter(|s| s.kind == SubmodelKind::Mode)
-        .filter_map(|s| model.upper_pole(s))
-        .collect();
-    poles.iter().enumerate().any(|(i, a)| {
-        poles[i + 1..].iter().any(|b| {
-            (a - b).norm() < crate::structure::DUPLICATE_FRACTION * 0.5 * (a.re.abs() + b.re.abs())
-        })
-    })
-}
-
 /// Why the modes of `model` from submodel `first` on are not kept, when one of them
 /// is unresolved (its half-power bandwidth `2 zeta f` below the line spacing) and not
-/// significant off its own lines ([`crate::structure::significant_off_peak`]: its
+/// significant off its own lines ([`significant_off_peak`]: its
 /// numerators refitted without the lines within one line spacing of it, the F test at
 /// `cfg.alpha` and at least `cfg.min_f`, with the noise scale of that residual).
 fn unresolved_spike(
@@ -475,9 +440,8 @@ fn unresolved_spike(
             continue;
         };
         let (f, bw) = (p.norm() / TAU, 2.0 * p.re.abs() / TAU);
-        let df = crate::structure::line_spacing_near(data, f);
-        if bw < df && !crate::structure::significant_off_peak(model, data, i, cfg.alpha, cfg.min_f)?
-        {
+        let df = line_spacing_near(data, f);
+        if bw < df && !significant_off_peak(model, data, i, cfg.alpha, cfg.min_f)? {
             return Ok(Some(format!(
                 "unresolved: half-power bandwidth {bw:.3} Hz below the line spacing {df:.3} Hz \
                  and not significant off its own lines"

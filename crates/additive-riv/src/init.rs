@@ -4,8 +4,9 @@
 
 use crate::numerators::fit_numerators;
 use crate::problem::FitData;
+use crate::significance::{f_critical, f_statistic, noise_scale};
 use crate::{AdditiveModel, Domain, KnownFactor, RivError};
-use frf_data::Fit;
+use frf_data::{Fit, ModelStructure};
 use std::f64::consts::TAU;
 use std::time::Instant;
 
@@ -170,4 +171,84 @@ pub fn initial_model(
     fit.messages = messages;
     fit.push_timing("init", t0.elapsed());
     Ok(fit)
+}
+
+/// Checks the sample rate of a zero-order hold against the band: positive, finite, and
+/// above twice the highest line.
+pub(crate) fn check_fs(fs_hz: f64, f_max: f64) -> Result<(), RivError> {
+    if !(fs_hz.is_finite() && fs_hz > 0.0) {
+        return Err(RivError::invalid(
+            "hold sample rate",
+            fs_hz,
+            "must be > 0 Hz",
+        ));
+    }
+    if f_max >= fs_hz / 2.0 {
+        return Err(RivError::invalid(
+            "hold sample rate",
+            fs_hz,
+            format!(
+                "the band reaches {f_max} Hz, at or above the Nyquist frequency {} Hz",
+                fs_hz / 2.0
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Initialises with 0, 1 and 2 integrators and keeps the simplest one that no richer
+/// one beats significantly (F test at 1e-3 on the numerator fit (24)).
+pub(crate) fn choose_rigid_body(
+    fd: &FitData,
+    freqs: &[f64],
+    base: &InitConfig,
+) -> Result<Fit<AdditiveModel>, RivError> {
+    let mut best: Option<Fit<AdditiveModel>> = None;
+    let mut tried = Vec::new();
+    for l in 0..=2usize {
+        let cfg = InitConfig {
+            rigid_body: if l == 0 {
+                RigidBody::None
+            } else {
+                RigidBody::Integrators(l)
+            },
+            ..base.clone()
+        };
+        let fit = match initial_model(fd, freqs, &cfg) {
+            Ok(f) => f,
+            Err(RivError::Structure(_)) => continue, // no submodel at all
+            Err(e) => return Err(e),
+        };
+        let v = fit.final_cost().unwrap_or(f64::INFINITY) * 2.0 * fd.n as f64;
+        tried.push((l, v));
+        best = match best {
+            None => Some(fit),
+            Some(b) => {
+                let vb = b.final_cost().unwrap_or(f64::INFINITY) * 2.0 * fd.n as f64;
+                let extra = fit
+                    .model
+                    .n_params()
+                    .saturating_sub(b.model.n_params())
+                    .max(1);
+                let s2 = noise_scale(v, fd, fit.model.n_params());
+                let fs = f_statistic(vb - v, extra, s2);
+                if fs > f_critical(extra, 1e-3) && v < vb {
+                    Some(fit)
+                } else {
+                    Some(b)
+                }
+            }
+        };
+    }
+    let mut best = best.ok_or_else(|| RivError::Structure("no modes and no rigid body".into()))?;
+    let l = best.model.integrators();
+    best.messages = vec![format!(
+        "rigid body: {l} integrator(s), chosen by comparing the initial fits ({})",
+        tried
+            .iter()
+            .map(|(l, v)| format!("l={l}: cost {:.3e}", v / (2.0 * fd.n as f64)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )];
+    Ok(best)
 }

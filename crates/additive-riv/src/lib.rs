@@ -39,6 +39,7 @@ pub use model::{
 pub mod numerators;
 pub mod pair_start;
 pub mod problem;
+pub mod residual_stats;
 pub mod riv;
 pub mod significance;
 pub mod small;

@@ -18,11 +18,11 @@
 //! same optimum of (8). On the reference wafer stage the refinement after the added mode
 //! takes 2 iterations instead of 7, to the same cost.
 
-use crate::complete::cost_of;
 use crate::problem::FitData;
+use crate::residual_stats::{
+    cost_of, floor_t, line_spacing_near, lines_within, pole_of, typical_mean, ResidualStats,
+};
 use crate::riv::{iterate, RivConfig};
-use crate::split::{floor_t, lines_within, pole_of, typical_mean};
-use crate::structure::{line_spacing_near, ResidualStats};
 use crate::{fit_numerators, AdditiveModel, Submodel, SubmodelKind};
 use frf_data::{Convergence, ModelStructure, ProgressSink};
 use std::f64::consts::TAU;

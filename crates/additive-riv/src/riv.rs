@@ -484,7 +484,7 @@ fn iterate_core(
                 let rel_full = rel_norm(&upd.d_shared, &shared).max(rel_norm(&upd.d_eta, &eta));
                 // at the round-off level of the data's energy no step can lower the
                 // cost reliably: an exact fit, not a failure
-                let exact = c <= crate::complete::EXACT_FIT_REL * data.weighted_energy();
+                let exact = c <= crate::residual_stats::EXACT_FIT_REL * data.weighted_energy();
                 convergence = if rel_full < 1e-6 || exact {
                     Convergence::CostTolerance {
                         relative_change: 0.0,

@@ -16,7 +16,8 @@ use rayon::prelude::*;
 /// The workspace's one normal quantile and the approximate chi-square and F critical
 /// values of the structure tests ([`frf_data::stats`]).
 pub use frf_data::stats::{
-    chi2_upper_approx as chi2_upper, f_critical_many_dof as f_critical, normal_quantile,
+    chi2_upper_approx as chi2_upper, f_critical_effective as f_critical_eff,
+    f_critical_many_dof as f_critical, normal_quantile,
 };
 
 /// Noise scale `s^2 = V / (N m - P/2)` of a fit with cost `v = sum w |E|^2` (unit when the

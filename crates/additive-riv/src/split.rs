@@ -25,11 +25,13 @@
 //! Both are significance decisions by the F test of the added parameters
 //! ([`crate::significance`]), with the noise scale estimated from the trial's residual.
 
-use crate::complete::{cost_of, has_duplicate};
 use crate::problem::FitData;
+use crate::residual_stats::{
+    cost_of, floor_t, has_duplicate, line_spacing_near, lines_within, pole_of, typical_mean,
+    ResidualStats,
+};
 use crate::riv::{iterate, RivConfig};
 use crate::significance::{f_critical, f_statistic, noise_scale};
-use crate::structure::{line_spacing_near, ResidualStats};
 use crate::{fit_numerators, AdditiveModel, Domain, RivError, SubmodelKind};
 use frf_data::{Convergence, ModelStructure, ProgressSink};
 use rayon::prelude::*;
@@ -206,44 +208,9 @@ fn coarse_config(riv: &RivConfig, cfg: &SplitConfig) -> RivConfig {
     }
 }
 
-/// Natural frequency (Hz) and damping of submodel `i`, when it is a resonance.
-pub(crate) fn pole_of(model: &AdditiveModel, i: usize) -> Option<(f64, f64)> {
-    let p = model.upper_pole(&model.submodels[i])?;
-    let f = p.norm() / TAU;
-    (f.is_finite() && f > 0.0).then(|| (f, -p.re / p.norm()))
-}
-
-/// The line range `[a, b)` of `data` within `lo_hz..=hi_hz`.
-pub(crate) fn lines_within(data: &FitData, lo_hz: f64, hi_hz: f64) -> (usize, usize) {
-    let a = data.omega.partition_point(|&w| w < TAU * lo_hz);
-    let b = data.omega.partition_point(|&w| w <= TAU * hi_hz);
-    (a, b.max(a))
-}
-
 /// The raw weighted residual energy `sum w |E|^2` of the lines `a..b`.
 fn energy(stats: &ResidualStats, a: usize, b: usize) -> f64 {
     stats.t[a..b].iter().sum::<f64>() * stats.s2 / 2.0
-}
-
-/// The typical neighbourhood among the modes' mean statistics `means`: their lower
-/// median (a model of two modes, one of them merged, has the other as its typical
-/// neighbourhood); 0 with fewer than two modes.
-pub(crate) fn typical_mean(mut means: Vec<f64>) -> f64 {
-    means.sort_by(|x, y| x.total_cmp(y));
-    if means.len() >= 2 {
-        means[(means.len() - 1) / 2]
-    } else {
-        0.0
-    }
-}
-
-/// The reference level of the per-line statistic: its lower quintile over the band. A
-/// model that misfits much of the band (a mode's tail reshaping its neighbours) raises
-/// the median too; the lines it fits at the noise level still set the lower quintile.
-pub(crate) fn floor_t(stats: &ResidualStats) -> f64 {
-    let mut s = stats.t.clone();
-    s.sort_by(|a, b| a.total_cmp(b));
-    s[s.len() / 5]
 }
 
 fn first_order_numerators(model: &AdditiveModel) -> bool {

@@ -10,13 +10,16 @@
 //! freedom. A peak must exceed the Bonferroni-corrected quantile over all lines. A mode
 //! is kept only when the F statistic of its parameters passes at significance `alpha`.
 
-use crate::complete::EXACT_FIT_REL;
 use crate::pair_start::with_local_pairs;
-use crate::problem::{cost, groups, pack, Basis, FitData, Layout};
+use crate::problem::FitData;
+use crate::residual_stats::{
+    cost_of, line_spacing_near, local_energy, mode_f_hz, significant_off_peak, ResidualStats,
+    DUPLICATE_FRACTION, EXACT_FIT_REL,
+};
 use crate::riv::{iterate_warm, RivConfig};
-use crate::significance::{chi2_upper, f_statistic, noise_scale, submodel_cost_increase};
+use crate::significance::{f_critical_eff, f_statistic, submodel_cost_increase};
 use crate::{fit_numerators, AdditiveModel, RivError, SubmodelKind};
-use frf_data::{Fit, ModelStructure, C64};
+use frf_data::{Fit, C64};
 use std::f64::consts::TAU;
 
 /// Settings of [`adapt_modes`].
@@ -95,101 +98,6 @@ pub struct AdaptReport {
     pub refinements: Vec<usize>,
 }
 
-/// The per-line statistic `2 T_k / s^2` of the weighted residual and its fitted null
-/// distribution `c chi2_nu`.
-///
-/// With independent residuals `nu = 2 ny nu` and `c = 1`; real FRF estimates are
-/// correlated across entries (a closed-loop estimate `Y U^-1` mixes the noise of all
-/// experiments into every column), which makes the statistic heavier-tailed. `nu` and
-/// `c` are therefore fitted robustly from the median and the median absolute deviation
-/// of the statistic over all lines (`sqrt(2/nu) = 1.4826 MAD / median`), so that the
-/// tests stay calibrated on correlated noise; `nu` never exceeds `2 ny nu`.
-#[derive(Debug, Clone)]
-pub struct ResidualStats {
-    /// `2 T_k / s^2` per line.
-    pub t: Vec<f64>,
-    /// Effective degrees of freedom of the null distribution.
-    pub nu: f64,
-    /// Scale of the null distribution.
-    pub c: f64,
-    /// Noise scale `s^2`.
-    pub s2: f64,
-}
-
-impl ResidualStats {
-    /// Computes the statistics of `model` on `data`.
-    pub fn new(model: &AdditiveModel, data: &FitData) -> Self {
-        let lay = Layout::of(model);
-        let basis = Basis::new(model, &lay, &data.omega);
-        let (_, eta) = pack(model, &lay);
-        let mut resid = Vec::new();
-        let v = cost(
-            data,
-            &lay,
-            &basis,
-            &eta,
-            Some(&mut resid),
-            &groups(model, &lay),
-        );
-        let s2 = noise_scale(v, data, model.n_params());
-        let m = data.m();
-        let t: Vec<f64> = (0..data.n)
-            .map(|k| {
-                (0..m)
-                    .map(|e| data.w[k * m + e] * resid[k * m + e].norm_sqr())
-                    .sum::<f64>()
-                    * 2.0
-                    / s2
-            })
-            .collect();
-        let mut sorted = t.clone();
-        sorted.sort_by(|a, b| a.total_cmp(b));
-        let med = sorted[sorted.len() / 2];
-        let mut dev: Vec<f64> = t.iter().map(|x| (x - med).abs()).collect();
-        dev.sort_by(|a, b| a.total_cmp(b));
-        let mad = 1.4826 * dev[dev.len() / 2];
-        let nu_max = 2.0 * m as f64;
-        let nu = if med > 0.0 && mad > 0.0 {
-            (2.0 * (med / mad).powi(2)).clamp(1.0, nu_max)
-        } else {
-            nu_max
-        };
-        let c = if med > 0.0 {
-            med / (nu - 2.0 / 3.0).max(0.5)
-        } else {
-            1.0
-        };
-        Self { t, nu, c, s2 }
-    }
-
-    /// The threshold the statistic exceeds with probability `alpha` under the fitted
-    /// null distribution.
-    pub fn threshold(&self, alpha: f64) -> f64 {
-        self.c * chi2_upper(self.nu, alpha)
-    }
-
-    /// The local level of the statistic around line `k`: its median over the lines within
-    /// `rel` (relative frequency) of line `k`, at least 10 lines each side.
-    pub fn local_median(&self, omega: &[f64], k: usize, rel: f64) -> f64 {
-        let n = self.t.len();
-        let lo_w = omega[k] * (1.0 - rel);
-        let hi_w = omega[k] * (1.0 + rel);
-        let a = omega
-            .partition_point(|&w| w < lo_w)
-            .min(k.saturating_sub(10));
-        let b = omega.partition_point(|&w| w <= hi_w).max((k + 11).min(n));
-        let mut win: Vec<f64> = self.t[a..b].to_vec();
-        win.sort_by(|x, y| x.total_cmp(y));
-        win[win.len() / 2]
-    }
-
-    /// The effective number of independent parameters among `p` entry-wise parameters of
-    /// `m` entries: `p nu / (2 m)`, at least 1.
-    pub fn effective_params(&self, p: usize, m: usize) -> f64 {
-        (p as f64 * self.nu / (2.0 * m as f64)).max(1.0)
-    }
-}
-
 /// Candidate frequencies (Hz) of missed modes: local maxima of the per-line weighted
 /// residual statistic ([`ResidualStats`]) that exceed both its Bonferroni-corrected
 /// threshold and [`PEAK_OVER_LOCAL`] times its local median (within +-10 % in
@@ -241,107 +149,8 @@ pub fn residual_peaks_over(
     peaks.into_iter().map(|(f, r, _)| (f, r)).collect()
 }
 
-/// Two modes are one when their poles are closer than this fraction of their mean
-/// `|Re p|` (half the half-power bandwidth): close modes with different shapes are
-/// often nearer than a bandwidth and must stay apart, but two submodels on practically
-/// the same pole are not identifiable.
-pub const DUPLICATE_FRACTION: f64 = 0.05;
-
 /// How far above its local median a residual peak must rise to be a mode candidate.
 pub const PEAK_OVER_LOCAL: f64 = 10.0;
-
-/// The weighted cost `sum w |E|^2` of `model` on `data`.
-fn model_cost(model: &AdditiveModel, data: &FitData) -> f64 {
-    let lay = Layout::of(model);
-    let basis = Basis::new(model, &lay, &data.omega);
-    let (_, eta) = pack(model, &lay);
-    cost(data, &lay, &basis, &eta, None, &groups(model, &lay))
-}
-
-/// The raw weighted residual energy `sum_k T_k` of the lines within `half_hz` of `f_hz`.
-pub fn local_energy(stats: &ResidualStats, data: &FitData, f_hz: f64, half_hz: f64) -> f64 {
-    let (lo, hi) = (TAU * (f_hz - half_hz), TAU * (f_hz + half_hz));
-    let a = data.omega.partition_point(|&w| w < lo);
-    let b = data.omega.partition_point(|&w| w <= hi);
-    stats.t[a..b].iter().sum::<f64>() * stats.s2 / 2.0
-}
-
-/// Line spacing of the data near `f_hz` (Hz).
-/// The spacing (Hz) of the lines of `data` around `f_hz`.
-pub fn line_spacing_near(data: &FitData, f_hz: f64) -> f64 {
-    let w = TAU * f_hz;
-    let k = data.omega.partition_point(|&x| x < w).min(data.n - 1);
-    let (a, b) = if k == 0 {
-        (0, 1.min(data.n - 1))
-    } else {
-        (k - 1, k)
-    };
-    if a == b {
-        return f64::INFINITY;
-    }
-    (data.omega[b] - data.omega[a]) / TAU
-}
-
-/// The natural frequency of submodel `i` of `model` (its upper pole's `|p| / 2 pi`), Hz;
-/// NaN when it has none.
-pub fn mode_f_hz(model: &AdditiveModel, i: usize) -> f64 {
-    model
-        .upper_pole(&model.submodels[i])
-        .map(|p| p.norm() / TAU)
-        .unwrap_or(f64::NAN)
-}
-
-/// True when mode `i` of `model` is significant on the lines outside its own
-/// resonance: its numerators are refitted with the lines within one line spacing of its
-/// frequency left out (zero weight), and its F statistic on the remaining lines passes
-/// the F test at `alpha` (and reaches at least `min_f`), its noise scale estimated from
-/// the residual on those lines. A mode narrower than
-/// the line spacing that fits one or two outlying lines (a spike of the noise) explains
-/// nothing elsewhere; a real lightly damped mode sampled coarsely shapes its flanks over
-/// many lines and is identified by them.
-pub(crate) fn significant_off_peak(
-    model: &AdditiveModel,
-    data: &FitData,
-    i: usize,
-    alpha: f64,
-    min_f: f64,
-) -> Result<bool, RivError> {
-    let f = mode_f_hz(model, i);
-    let df = line_spacing_near(data, f);
-    if !(f.is_finite() && df.is_finite()) {
-        return Ok(false);
-    }
-    let m = data.m();
-    let mut w = data.w.clone();
-    for k in 0..data.n {
-        if (data.omega[k] / TAU - f).abs() <= df * (1.0 + 1e-9) {
-            w[k * m..(k + 1) * m].iter_mut().for_each(|x| *x = 0.0);
-        }
-    }
-    let off = FitData::from_parts(
-        data.omega.clone(),
-        data.ny,
-        data.nu,
-        data.g.clone(),
-        w,
-        data.band_hz,
-    );
-    let mut trial = model.clone();
-    let v = match fit_numerators(&mut trial, &off) {
-        Ok(v) => v,
-        Err(RivError::Numerical { .. }) => return Ok(false),
-        Err(e) => return Err(e),
-    };
-    let dv = match submodel_cost_increase(&trial, &off) {
-        Ok(dv) => dv,
-        Err(RivError::Numerical { .. }) => return Ok(false),
-        Err(e) => return Err(e),
-    };
-    let p = trial.submodels[i].den.len() + trial.submodels[i].num.len() * m;
-    let s2 = noise_scale(v, &off, trial.n_params());
-    let fs = f_statistic(dv[i], p, s2);
-    Ok(fs >= f_critical_eff(p as f64, alpha).max(min_f))
-}
 
 /// Removed (submodel index, frequency, reason), per-submodel (frequency, F statistic),
 /// and, when nothing was removed, the residual statistics of the model as returned (the
@@ -532,7 +341,7 @@ pub fn adapt_modes(
     for round in 0..cfg.max_rounds {
         report.rounds = round + 1;
         let previous = fit.clone();
-        let previous_cost = model_cost(&previous.model, data);
+        let previous_cost = cost_of(&previous.model, data);
         let mut model = fit.model.clone();
         // 1. remove what does not belong
         let (dropped, _, kept_stats) = drop_pass(&mut model, data, cfg, &[])?;
@@ -548,7 +357,7 @@ pub fn adapt_modes(
         let cost_now = if dropped.is_empty() {
             previous_cost
         } else {
-            model_cost(&model, data)
+            cost_of(&model, data)
         };
         let exact = cost_now <= EXACT_FIT_REL * data.weighted_energy();
         let first_order = model_first_order(&model);
@@ -674,7 +483,7 @@ pub fn adapt_modes(
         }
         fit = refit;
         // a round that ends worse than it started (the refit went astray) is undone
-        if model_cost(&fit.model, data) > previous_cost * (1.0 + 1e-9) {
+        if cost_of(&fit.model, data) > previous_cost * (1.0 + 1e-9) {
             report.dropped.push((
                 f64::NAN,
                 format!("round {} undone: it raised the cost", round + 1),
@@ -710,11 +519,6 @@ pub fn adapt_modes(
         ));
     }
     Ok((fit, report))
-}
-
-/// Critical F value for `p_eff` effective parameters at significance `alpha`.
-fn f_critical_eff(p_eff: f64, alpha: f64) -> f64 {
-    chi2_upper(p_eff, alpha) / p_eff
 }
 
 fn model_first_order(model: &AdditiveModel) -> bool {

@@ -339,8 +339,14 @@ pub fn chi2_upper_approx(dof: f64, alpha: f64) -> f64 {
 /// significance `alpha` with many residual degrees of freedom: `chi2_p(alpha) / p`
 /// ([`chi2_upper_approx`]; `p` at least 1).
 pub fn f_critical_many_dof(p: usize, alpha: f64) -> f64 {
-    let p = p.max(1) as f64;
-    chi2_upper_approx(p, alpha) / p
+    f_critical_effective(p.max(1) as f64, alpha)
+}
+
+/// [`f_critical_many_dof`] for an effective (non-integer) number of parameters `p_eff >
+/// 0`: the parameters of `p` entry-wise ones that are independent under correlated
+/// noise (`additive-riv`'s residual statistics).
+pub fn f_critical_effective(p_eff: f64, alpha: f64) -> f64 {
+    chi2_upper_approx(p_eff, alpha) / p_eff
 }
 
 #[cfg(test)]

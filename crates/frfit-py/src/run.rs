@@ -11,7 +11,7 @@ use frfit::options::{
     parse_band, parse_band_weights, parse_bands, parse_delay, parse_frf_type, parse_hold,
     parse_method, parse_modes, parse_weighting, Band, FitSpec,
 };
-use frfit::pipeline::{self, PipelineOutput};
+use frfit::run::{self, PipelineOutput};
 use frfit::summary::StepSummary;
 use frfit::validation::{FrfValidation, GammaMethod};
 use frfit::validation_report::{validate_model, verdict_text, write_validation_dir};
@@ -204,7 +204,7 @@ pub fn fit(
     let source = source_of(data);
     let frf = &data.inner;
     let out = py
-        .detach(|| pipeline::run(frf, &source, &cfg, "fit"))
+        .detach(|| run::run(frf, &source, &cfg, "fit"))
         .map_err(to_py)?;
     model_of(&out, &source, "frfit (python) fit")
 }
@@ -538,7 +538,7 @@ pub fn diagnose(
     let frf = &data.inner;
     let (out, test) = py
         .detach(|| -> Result<_, FrfitError> {
-            let out = pipeline::run(frf, &source, &cfg, "diagnose")?;
+            let out = run::run(frf, &source, &cfg, "diagnose")?;
             let test = test
                 .map(|s| {
                     frfit::predict::TestRecordPredictions::of(&out, &s, "the test_records arrays")

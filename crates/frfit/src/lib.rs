@@ -2,8 +2,10 @@
 //!
 //! The facade of the workspace: the pipeline (load -> band -> delay -> CMIF -> init ->
 //! refine -> validate -> diagnose -> report), the residual-diagnosis loop, SVG plots and
-//! the `frfit` command-line tool. The estimators live in their own crates and are
-//! re-exported here so that a user can depend on `frfit` alone.
+//! the `frfit` command-line tool. A run ([`run::run`]) stands on the diagnosis loop
+//! ([`diagnose`]), which stands on the pipeline's stages ([`pipeline`]). The estimators
+//! live in their own crates and are re-exported here so that a user can depend on
+//! `frfit` alone.
 
 pub mod chain;
 pub mod data;
@@ -18,6 +20,7 @@ pub mod plots;
 pub mod predict;
 pub mod reduce;
 pub mod report;
+pub mod run;
 pub mod summary;
 pub mod validation_report;
 

@@ -253,7 +253,7 @@ pub struct TestRecordPredictions {
 impl TestRecordPredictions {
     /// Both models of `out` on the test records `spectra` (from `source`).
     pub fn of(
-        out: &crate::pipeline::PipelineOutput,
+        out: &crate::run::PipelineOutput,
         spectra: &PeriodicSpectra,
         source: &str,
     ) -> Result<Self, FrfitError> {

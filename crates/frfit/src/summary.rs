@@ -32,6 +32,7 @@
 //! ```
 
 use serde::{Deserialize, Serialize};
+use validation::analysis::Effect;
 
 /// The schema tag.
 pub const SCHEMA: &str = "frfit-summary";
@@ -166,11 +167,25 @@ pub struct RepairSummary {
     pub f_statistic: f64,
 }
 
+/// The summary name of an effect (`missed_mode`, `delay`, ...): the `effect` of a step
+/// ([`StepSummary::effect`]).
+pub fn effect_name(e: Effect) -> &'static str {
+    match e {
+        Effect::MissedMode => "missed_mode",
+        Effect::Delay => "delay",
+        Effect::Hold => "hold",
+        Effect::Feedthrough => "feedthrough",
+        Effect::Stiffness => "stiffness",
+        Effect::InputDynamics => "input_dynamics",
+        Effect::OutputDynamics => "output_dynamics",
+    }
+}
+
 /// One step of the diagnosis loop: a candidate effect, tested.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StepSummary {
     /// `missed_mode`, `delay`, `hold`, `feedthrough`, `stiffness`, `input_dynamics` or
-    /// `output_dynamics`.
+    /// `output_dynamics` ([`effect_name`]).
     pub effect: String,
     /// Whether the effect was added to the model.
     pub accepted: bool,

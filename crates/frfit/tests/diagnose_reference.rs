@@ -9,7 +9,8 @@ use additive_riv::ModeSelection;
 use frf_data::io::read_frf_csv;
 use frf_data::shared_data::require;
 use frf_data::FrfDataset;
-use frfit::pipeline::{run, PipelineConfig, PipelineOutput};
+use frfit::pipeline::PipelineConfig;
+use frfit::run::{run, PipelineOutput};
 
 fn diagnose(test: &str, name: &str, modes: ModeSelection) -> Option<PipelineOutput> {
     let path = require(test, name)?;

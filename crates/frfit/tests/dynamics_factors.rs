@@ -14,7 +14,7 @@ use realize::{DynamicsFactor, FactorTarget};
 /// The run names none of the effects `absent`, ends noise-limited, and its final model is
 /// within 1e-4 (median relative) of the noiseless response `clean`.
 fn ends_noise_limited_near_truth(
-    out: &frfit::pipeline::PipelineOutput,
+    out: &frfit::run::PipelineOutput,
     clean: &frf_data::Frf,
     absent: &[&str],
 ) {
@@ -263,7 +263,7 @@ fn an_actuator_lag_is_first_order_even_where_a_second_order_fits_as_well() {
         ..Default::default()
     };
     let t = std::time::Instant::now();
-    let out = frfit::pipeline::run(&data, "lag on input 4, plate 29", &cfg, "diagnose").unwrap();
+    let out = frfit::run::run(&data, "lag on input 4, plate 29", &cfg, "diagnose").unwrap();
     common::print_steps("lag on input 4, plate 29", &out);
     println!("  diagnosis took {:.1} s", t.elapsed().as_secs_f64());
     let steps = common::accepted(&out, "input_dynamics");

@@ -12,7 +12,7 @@ use additive_riv::ModeSelection;
 use experiment::synth::FlexibleMode;
 use faer::Mat;
 use frf_data::Frf;
-use frfit::pipeline::PipelineOutput;
+use frfit::run::PipelineOutput;
 use realize::{DynamicsFactor, FactorTarget};
 
 /// The simulation set-up of these tests: 4 periods x 10 realizations, lines 1 Hz apart.

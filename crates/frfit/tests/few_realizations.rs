@@ -9,7 +9,8 @@
 mod common;
 
 use frf_data::Frf;
-use frfit::pipeline::{run, PipelineConfig};
+use frfit::pipeline::PipelineConfig;
+use frfit::run::run;
 
 /// The wafer stage (seed 3), 2 periods x 3 realizations, lines up to 2 kHz, with the
 /// comments `frfit simulate` writes.

@@ -5,7 +5,8 @@
 
 mod common;
 
-use frfit::pipeline::{run, PipelineConfig, NOT_ANALYSED};
+use frfit::pipeline::{PipelineConfig, NOT_ANALYSED};
+use frfit::run::run;
 
 #[test]
 fn a_fit_without_the_final_analysis_is_the_same_fit_without_a_verdict() {

@@ -216,7 +216,8 @@ fn compressed_subspace_matches_the_full_step() {
 /// the noise.
 #[test]
 fn a_fitted_delay_does_not_cost_the_final_model_its_residues() {
-    use frfit::pipeline::{run, PipelineConfig};
+    use frfit::pipeline::PipelineConfig;
+    use frfit::run::run;
     for seed in 1..=3 {
         let r = RandomModal::generate(&RandomModalConfig {
             ny: 6,
@@ -279,8 +280,9 @@ fn fit_random_20_by_20(
     rigid_body: bool,
     noise: f64,
     delay: Option<DelayChoice>,
-) -> (frfit::pipeline::PipelineOutput, usize, Vec<f64>) {
-    use frfit::pipeline::{run, PipelineConfig};
+) -> (frfit::run::PipelineOutput, usize, Vec<f64>) {
+    use frfit::pipeline::PipelineConfig;
+    use frfit::run::run;
     let r = RandomModal::generate(&RandomModalConfig {
         ny: 20,
         nu: 20,
@@ -386,11 +388,7 @@ fn the_chain_finds_every_mode_at_ten_times_the_noise() {
 
 /// All 50 true modes within 0.1 % (`n` of them found among the fitted `fit_f`), no
 /// spurious one, and the final residual at the noise level (below 1.05 times it).
-fn assert_every_mode_at_the_noise_level(
-    out: &frfit::pipeline::PipelineOutput,
-    n: usize,
-    fit_f: &[f64],
-) {
+fn assert_every_mode_at_the_noise_level(out: &frfit::run::PipelineOutput, n: usize, fit_f: &[f64]) {
     let s = &out.summary;
     println!(
         "{n}/50 modes within 0.1 %, {} fitted, {} integrators, residual/noise {:.3}",

@@ -5,7 +5,8 @@
 
 use additive_riv::{AdditiveModel, Domain, ModeSelection};
 use frf_data::{Frf, ModelStructure, C64};
-use frfit::pipeline::{run, PipelineConfig};
+use frfit::pipeline::PipelineConfig;
+use frfit::run::run;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::TAU;

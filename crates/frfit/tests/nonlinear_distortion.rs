@@ -10,7 +10,8 @@ mod common;
 use frf_data::io::read_frf_csv;
 use frf_data::shared_data::require;
 use frf_data::{Frf, FrfDataset};
-use frfit::pipeline::{run, PipelineConfig, PipelineOutput};
+use frfit::pipeline::PipelineConfig;
+use frfit::run::{run, PipelineOutput};
 
 /// The wafer stage (seed 3), 10 periods of one realization, lines up to 2 kHz, with a
 /// stochastic nonlinear contribution of relative level `distortion`; the estimate and

@@ -16,7 +16,8 @@
 use experiment::nonparametric::EstimatorConfig;
 use experiment::synth::{piezo_experiment, PiezoConfig, SimulationPath};
 use frf_data::{Frf, FrfDataset};
-use frfit::pipeline::{run, PipelineConfig};
+use frfit::pipeline::PipelineConfig;
+use frfit::run::run;
 
 fn piezo_data(seed: u64) -> (Frf, Frf, f64) {
     let cfg = PiezoConfig {

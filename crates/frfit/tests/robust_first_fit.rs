@@ -8,7 +8,8 @@
 mod common;
 
 use frf_data::Frf;
-use frfit::pipeline::{run, PipelineConfig};
+use frfit::pipeline::PipelineConfig;
+use frfit::run::run;
 
 /// Upper band edge of the fit, Hz: below every plate's last mode.
 const BAND_HI: f64 = 1800.0;

@@ -8,9 +8,10 @@
 
 use frf_data::io::read_frf_csv;
 use frf_data::shared_data::require;
-use frfit::pipeline::{run, PipelineConfig};
+use frfit::pipeline::PipelineConfig;
+use frfit::run::run;
 
-fn fit(test: &str, name: &str, band: (f64, f64)) -> Option<frfit::pipeline::PipelineOutput> {
+fn fit(test: &str, name: &str, band: (f64, f64)) -> Option<frfit::run::PipelineOutput> {
     let path = require(test, name)?;
     let data = read_frf_csv(&path).unwrap();
     let cfg = PipelineConfig {

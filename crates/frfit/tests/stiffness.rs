@@ -5,7 +5,8 @@
 
 use faer::Mat;
 use frf_data::{Frf, C64};
-use frfit::pipeline::{run, PipelineConfig};
+use frfit::pipeline::PipelineConfig;
+use frfit::run::run;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use realize::{ModalModel, PolePair};

@@ -27,6 +27,7 @@ pub mod refine;
 mod shared;
 pub mod stats;
 pub mod varpro;
+mod weight_groups;
 
 pub use error::MlError;
 pub use jacobian::{currency_jacobian_into, AnalyticModel};

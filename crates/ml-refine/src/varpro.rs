@@ -27,7 +27,7 @@
 use crate::basis::{first_order, first_order_pair, powers, rigid_bases, zoh_ts};
 use crate::gram::{gram_lstsq, gram_r, gram_r_with};
 use crate::qr::{back_substitute, householder_r};
-use crate::shared::Shared;
+use crate::weight_groups::Shared;
 use crate::C64;
 use rayon::prelude::*;
 use realize::{FrfModel, PolePair, RealPole};

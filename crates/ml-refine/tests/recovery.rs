@@ -175,3 +175,76 @@ fn integrators_the_data_do_not_need_are_dropped_and_a_rigid_body_stays() {
         assert_eq!(kept.model.modal.rigid.len(), 2);
     }
 }
+
+/// A start whose delay is off (a delay estimate a few microseconds from the plant's, as
+/// the phase slope of a measured FRF gives it) stands far above the noise level: the
+/// refinement holds the delay while it adapts the structure, and the modes it adds then
+/// take up the delay's misfit beside the true resonances. Freed, the delay explains that
+/// misfit; every added mode is tested again at the final structure and dropped when it
+/// no longer explains more than noise. The fit ends with the plant's modes, no more.
+#[test]
+fn modes_added_under_a_held_delay_are_dropped_once_the_delay_is_free() {
+    let mut with_additions = 0;
+    for seed in [1u64, 2, 3, 4, 5, 6] {
+        let mut truth = system(seed, 3, 3, 5, false, false);
+        truth.factors.delay_s = 1.0e-4;
+        truth.factors.delay_fitted = true;
+        let d = data_floor(&truth, 1200, 1e-3, seed);
+        let mut start = perturbed(&truth, 0.002, 0.2, seed);
+        start.factors.delay_s = 0.9e-4;
+        let fit = MlRefine::new(MlConfig::default())
+            .estimate(&d, ChainModel::from(start))
+            .unwrap();
+        let msgs = fit.messages.join("\n");
+        println!(
+            "seed {seed}: {} modes, delay {:.3} us, cost ratio {:.3}\n{msgs}\nfit (f, zeta) {:?}\ntruth {:?}",
+            fit.model.modal.pairs.len(),
+            fit.model.factors.delay_s * 1e6,
+            fit.report.cost_ratio,
+            fit.model.modal.pairs.iter().map(|p| (p.f_hz(), p.zeta())).collect::<Vec<_>>(),
+            truth.modal.pairs.iter().map(|p| (p.f_hz(), p.zeta())).collect::<Vec<_>>(),
+        );
+        assert!(
+            fit.convergence.is_converged(),
+            "seed {seed}: {:?}",
+            fit.convergence
+        );
+        assert_eq!(fit.model.modal.pairs.len(), 5, "seed {seed}\n{msgs}");
+        for p in &truth.modal.pairs {
+            let nearest = fit
+                .model
+                .modal
+                .pairs
+                .iter()
+                .map(|q| (q.f_hz() - p.f_hz()).abs() / p.f_hz())
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                nearest < 1e-3,
+                "seed {seed}: {:.2} Hz missed\n{msgs}",
+                p.f_hz()
+            );
+        }
+        assert!(
+            (fit.model.factors.delay_s - 1e-4).abs() < 1e-8,
+            "seed {seed}: delay {:.4} us",
+            fit.model.factors.delay_s * 1e6
+        );
+        assert!(
+            fit.report.cost_ratio < 1.1,
+            "seed {seed}: cost ratio {:.3}",
+            fit.report.cost_ratio
+        );
+        if msgs.contains(" added at ") {
+            with_additions += 1;
+            assert!(
+                msgs.contains("at the final structure"),
+                "seed {seed}\n{msgs}"
+            );
+        }
+    }
+    // the case the test is about: the held delay did make the refinement add modes
+    assert!(
+        with_additions >= 4,
+        "{with_additions} of 6 seeds added modes"
+    );
+}

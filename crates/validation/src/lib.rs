@@ -42,6 +42,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod analysis;
 pub(crate) mod cmat;
 pub mod distortion;
 pub mod disturbance;
@@ -56,6 +57,7 @@ mod serde_f64;
 pub mod signatures;
 pub mod stats;
 
+pub use analysis::{analyze_residual, Effect, EffectEvidence, ResidualAnalysis};
 pub use distortion::{floor_noise, line_floor, residual_ratio, LineFloor, LineFloorConfig};
 pub use disturbance::{chi2_2_quantile, Coverage, DisturbanceModel};
 pub use error::ValidationError;
@@ -69,9 +71,8 @@ pub use invalidation::{
 pub use mu::{generalized_mu_bounds, mu_bounds, Block, BlockStructure, MuBounds, MuConfig};
 pub use noise::{estimate_noise, noise_level, NoiseConfig, NoiseLevel, NoiseSource};
 pub use residual::{
-    analyze_residual, concentration, magnitude_trend, relative_error_stats, Concentration, Effect,
-    EffectEvidence, MagnitudeTrend, Residual, ResidualAnalysis, ResidualConfig, Significance,
-    TrendClass,
+    concentration, magnitude_trend, relative_error_stats, Concentration, MagnitudeTrend, Residual,
+    ResidualConfig, Significance, TrendClass,
 };
 pub use signatures::{
     common_factor, feedthrough_signature, hold_signature, io_factors, mode_signature, phase_trend,

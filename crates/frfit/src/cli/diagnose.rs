@@ -9,7 +9,7 @@ use super::validate;
 use clap::Args as ClapArgs;
 use frf_data::FrfDataset;
 use frfit::additive_riv::ModelFile;
-use frfit::pipeline;
+use frfit::run;
 use frfit::FrfitError;
 use std::path::PathBuf;
 
@@ -90,7 +90,7 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     }
     let (sink, bar) = progress(quiet);
     cfg.progress = sink;
-    let out = pipeline::run(&data, &args.data.display().to_string(), &cfg, "diagnose");
+    let out = run::run(&data, &args.data.display().to_string(), &cfg, "diagnose");
     if let Some(b) = bar {
         b.finish_and_clear();
     }
@@ -188,7 +188,7 @@ fn validate_final_model(
 fn predict_test_records(
     args: &Args,
     fs: Option<f64>,
-    out: &pipeline::PipelineOutput,
+    out: &run::PipelineOutput,
     quiet: bool,
 ) -> Result<(), FrfitError> {
     use frfit::nonparametric::{spectra_from_files, RecordSpec};

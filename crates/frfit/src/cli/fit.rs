@@ -6,7 +6,7 @@ use super::common::load_data;
 use super::model_opts::{progress, FitOptions};
 use super::output::print_fit;
 use clap::Args as ClapArgs;
-use frfit::pipeline;
+use frfit::run;
 use frfit::FrfitError;
 use std::path::PathBuf;
 
@@ -36,7 +36,7 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
     cfg.final_analysis = args.report.is_some();
     let (sink, bar) = progress(quiet);
     cfg.progress = sink;
-    let out = pipeline::run(&data, &args.data.display().to_string(), &cfg, "fit");
+    let out = run::run(&data, &args.data.display().to_string(), &cfg, "fit");
     if let Some(b) = bar {
         b.finish_and_clear();
     }

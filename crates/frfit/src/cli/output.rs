@@ -1,7 +1,7 @@
 //! Printing the summary of a fit (the files are written by
 //! [`PipelineOutput::write_outputs`]).
 
-use frfit::pipeline::PipelineOutput;
+use frfit::run::PipelineOutput;
 
 /// Prints the modes and the error of a fit.
 pub fn print_fit(out: &PipelineOutput) {

@@ -1,24 +1,16 @@
 //! Acceptance of a round's best trial, pruning of the modes it made redundant, and the
 //! final refinement with its guards (stability, never worse than the first fit).
 
-use super::trial::{f_test, model_cost, refit, Trial};
+use super::refit::{f_test, model_cost, refit, unstable_parts, Refitted};
+use super::trial::Trial;
 use crate::pipeline::{err, FitContext, PipelineConfig};
 use crate::FrfitError;
+use additive_riv::residual_stats::mode_f_hz;
 use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::significance::{f_statistic, noise_scale, submodel_cost_increase};
-use additive_riv::structure::{close_mode_pairs, mode_f_hz, prune_modes, AdaptConfig};
+use additive_riv::structure::{close_mode_pairs, prune_modes, AdaptConfig};
 use additive_riv::AdditiveModel;
 use frf_data::{Convergence, Fit, ModelStructure};
-
-/// Submodels and dynamics factors of `model` with a pole in the closed right half-plane.
-pub fn unstable_parts(model: &AdditiveModel) -> usize {
-    model.unstable_submodels().len()
-        + model
-            .dynamics
-            .iter()
-            .filter(|d| d.poles().iter().any(|p| p.re >= 0.0))
-            .count()
-}
 
 /// Of the trials that pass their F test, lower the cost of `current` (at
 /// `current_cost`) and leave no more unstable parts than it has (an effect that leaves
@@ -90,7 +82,7 @@ fn insignificant_without(
     riv: &RivConfig,
     (model, cost): (&AdditiveModel, f64),
     reduced: AdditiveModel,
-) -> Option<(super::trial::Refitted, f64, f64)> {
+) -> Option<(Refitted, f64, f64)> {
     let r = refit(reduced, fd, riv).ok()?;
     let removed = model.n_params().saturating_sub(r.model.n_params()).max(1);
     let (_, f, f_crit) = f_test(model, fd, r.cost, cost, removed, cfg);
@@ -101,7 +93,7 @@ fn insignificant_without(
 /// Two modes are twins when their poles are closer than this fraction of their mean
 /// `|Re p|`: within each other's half-power half-bandwidth, where two submodels can
 /// share one resonance between them (the pruning's duplicate test, at
-/// [`additive_riv::structure::DUPLICATE_FRACTION`], holds only poles on practically the
+/// [`additive_riv::residual_stats::DUPLICATE_FRACTION`], holds only poles on practically the
 /// same point).
 const TWIN_FRACTION: f64 = 1.0;
 

@@ -1,13 +1,13 @@
 //! The candidates of a diagnosis round: one variant per effect of the catalogue, with
 //! the parameters the refit starts from, proposed from the residual analysis.
 
-use additive_riv::structure::ResidualStats;
+use additive_riv::residual_stats::ResidualStats;
 use additive_riv::{
     augment, AdditiveModel, DynamicsFactor, FactorTarget, FitData, RivError, SubmodelKind,
 };
 use frf_data::ModelStructure;
 use rayon::prelude::*;
-use validation::residual::{Effect, ResidualAnalysis};
+use validation::analysis::{Effect, ResidualAnalysis};
 
 /// Where a delay candidate's start comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -2,10 +2,11 @@
 //! a step of `summary.json` (field names of the README's schema section).
 
 use super::candidate::{Candidate, FactorStart};
+use super::refit::new_modes;
 use additive_riv::{AdditiveModel, SubmodelKind};
 use serde::Serialize;
 use std::f64::consts::TAU;
-use validation::residual::Effect;
+use validation::analysis::Effect;
 
 /// The refit-from-the-start marker of a delay step (`"refit": "from the start"`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -148,7 +149,7 @@ impl FittedEffect {
         match candidate {
             Candidate::MissedMode { f_hz: f0, zeta, .. } => {
                 // the mode of `m` that `before` does not have: the one nearest the start
-                let new = super::trial::new_modes(before, m)
+                let new = new_modes(before, m)
                     .into_iter()
                     .min_by(|a, b| (a.0 - f0).abs().total_cmp(&(b.0 - f0).abs()));
                 let (f_hz, zeta) = new.unwrap_or((*f0, *zeta));

@@ -1,14 +1,15 @@
 //! A step earns its place on data it was not fitted to (issue 42): interleaved lines.
 //!
-//! The band's lines are split into the even and the odd ones. The model before the step
-//! and the model after it are each refitted (Algorithm 1 from their own parameters) on
-//! one half and their weighted cost taken on the other, then the halves swap; the step
-//! passes when the summed held-out cost after it is below the one before it. An effect
-//! that the data hold lowers the error on lines it was not fitted to; parameters that
-//! only follow the noise or the nonlinear distortion of the fitted lines (both
-//! independent from line to line) raise it. Every line is fitted and tested once, so
-//! the check needs no data beyond the band, and the `--validate` data stay independent
-//! for the final validation.
+//! The band's lines are split into the even and the odd ones
+//! ([`crate::pipeline::interleave`]). The model before the step and the model after it
+//! are each refitted (Algorithm 1 from their own parameters) on one half and their
+//! weighted cost taken on the other, then the halves swap; the step passes when the
+//! summed held-out cost after it is below the one before it. An effect that the data
+//! hold lowers the error on lines it was not fitted to; parameters that only follow the
+//! noise or the nonlinear distortion of the fitted lines (both independent from line to
+//! line) raise it. Every line is fitted and tested once, so the check needs no data
+//! beyond the band, and the `--validate` data stay independent for the final
+//! validation.
 
 use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::{AdditiveModel, FitData};
@@ -30,31 +31,11 @@ impl HeldOut {
     }
 }
 
-/// The lines of `fd` whose index has parity `parity` (0: even, 1: odd), with their
-/// weights; the band (the frequency scaling) is that of `fd`.
-pub fn interleaved(fd: &FitData, parity: usize) -> FitData {
-    let m = fd.m();
-    let keep: Vec<usize> = (0..fd.n).filter(|k| k % 2 == parity).collect();
-    let omega = keep.iter().map(|&k| fd.omega[k]).collect();
-    let g = keep
-        .iter()
-        .flat_map(|&k| fd.g[k * m..(k + 1) * m].iter().copied())
-        .collect();
-    let w = keep
-        .iter()
-        .flat_map(|&k| fd.w[k * m..(k + 1) * m].iter().copied())
-        .collect();
-    FitData::from_parts(omega, fd.ny, fd.nu, g, w, fd.band_hz)
-}
-
-/// The even and the odd lines of `fd` ([`interleaved`]).
-pub fn halves(fd: &FitData) -> [FitData; 2] {
-    [interleaved(fd, 0), interleaved(fd, 1)]
-}
-
 /// The held-out costs of the step from `before` to `after` on the band split into
-/// `halves` ([`halves`]; see the module documentation), the refits by `riv`. `None` when
-/// the band has too few lines to split or a refit fails (the check is then not made).
+/// `halves` ([`crate::pipeline::interleave::halves`], made once by
+/// [`FitContext::held_out_halves`](crate::pipeline::FitContext::held_out_halves); see
+/// the module documentation), the refits by `riv`. `None` when the band has too few
+/// lines to split or a refit fails (the check is then not made).
 pub fn held_out(
     halves: &[FitData; 2],
     riv: &RivConfig,
@@ -71,7 +52,7 @@ pub fn held_out(
             let model = if is_after { after } else { before };
             let (fit_on, test_on) = (&halves[fold], &halves[1 - fold]);
             let refit = iterate(model.clone(), fit_on, riv).ok()?;
-            let c = additive_riv::complete::cost_of(&refit.model, test_on);
+            let c = additive_riv::residual_stats::cost_of(&refit.model, test_on);
             c.is_finite().then_some((is_after, c))
         })
         .collect();
@@ -88,31 +69,4 @@ pub fn held_out(
         }
     }
     Some(out)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use frf_data::C64;
-
-    #[test]
-    fn interleaved_halves_partition_the_lines() {
-        let n = 9;
-        let (ny, nu) = (2, 1);
-        let omega: Vec<f64> = (1..=n).map(|k| k as f64).collect();
-        let g: Vec<C64> = (0..n * 2)
-            .map(|i| C64::new(i as f64, -(i as f64)))
-            .collect();
-        let w: Vec<f64> = (0..n * 2).map(|i| 1.0 + i as f64).collect();
-        let fd = FitData::from_parts(omega, ny, nu, g, w, (1.0, 9.0));
-        let (even, odd) = (interleaved(&fd, 0), interleaved(&fd, 1));
-        assert_eq!((even.n, odd.n), (5, 4));
-        assert_eq!(even.omega, vec![1.0, 3.0, 5.0, 7.0, 9.0]);
-        assert_eq!(odd.omega, vec![2.0, 4.0, 6.0, 8.0]);
-        // line 1 (the first odd one) keeps both entries and their weights
-        assert_eq!(odd.g[0], fd.g[2]);
-        assert_eq!(odd.g[1], fd.g[3]);
-        assert_eq!(odd.w[..2], fd.w[2..4]);
-        assert_eq!(even.band_hz, fd.band_hz);
-    }
 }

@@ -24,6 +24,7 @@ mod accept;
 mod candidate;
 mod fitted;
 pub mod held_out;
+mod refit;
 mod restart;
 mod trial;
 
@@ -34,29 +35,17 @@ pub use restart::{
 };
 
 use crate::pipeline::{err, error_stats, FitContext, PipelineConfig};
-use crate::summary::{ErrorStats, StepSummary};
+use crate::summary::{effect_name, ErrorStats, StepSummary};
 use crate::FrfitError;
+use additive_riv::residual_stats::ResidualStats;
 use additive_riv::riv::RivConfig;
-use additive_riv::structure::ResidualStats;
 use additive_riv::AdditiveModel;
 use frf_data::{Fit, ModelStructure, ProgressSink};
 use rayon::prelude::*;
 use realize::ResponseGrid;
-use trial::{model_cost, Current, Trial};
-use validation::residual::{analyze_residual, Effect, ResidualAnalysis};
-
-/// The summary name of an effect (`missed_mode`, `delay`, ...).
-pub fn effect_name(e: Effect) -> &'static str {
-    match e {
-        Effect::MissedMode => "missed_mode",
-        Effect::Delay => "delay",
-        Effect::Hold => "hold",
-        Effect::Feedthrough => "feedthrough",
-        Effect::Stiffness => "stiffness",
-        Effect::InputDynamics => "input_dynamics",
-        Effect::OutputDynamics => "output_dynamics",
-    }
-}
+use refit::model_cost;
+use trial::{Current, Trial};
+use validation::analysis::{analyze_residual, Effect, ResidualAnalysis};
 
 /// What the loop produced.
 pub struct Diagnosis {
@@ -623,7 +612,7 @@ const SCREEN_ITERATIONS: usize = 4;
 /// refitted to convergence.
 const SCREEN_KEEP: f64 = 0.25;
 
-/// How many times its extrapolated remaining decrease ([`trial::remaining_decrease`]) a
+/// How many times its extrapolated remaining decrease ([`refit::remaining_decrease`]) a
 /// screened refit is granted: it continues only when its cost, lowered by that much,
 /// reaches the round's best passing cost (the extrapolation assumes geometrically
 /// shrinking decreases; the margin covers refits that settle more slowly).

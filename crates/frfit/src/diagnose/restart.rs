@@ -13,7 +13,8 @@
 //! - the `delay` step is the restart with the delay refined, tested against the held
 //!   refit too: it passes only when the delay itself explains more than noise.
 
-use super::trial::{f_test, lacked_light_modes, light_in_band, model_cost};
+use super::candidate::delay_proposals;
+use super::refit::{f_test, lacked_light_modes, light_in_band, model_cost};
 use crate::pipeline::{
     chain_fit, err, FirstFit, FitContext, PipelineConfig, SECOND_START, SECOND_START_RESIDUAL,
 };
@@ -22,7 +23,7 @@ use crate::FrfitError;
 use additive_riv::riv::iterate;
 use additive_riv::{fit_numerators, AdditiveModel, DelayChoice};
 use frf_data::{Fit, ModelStructure};
-use validation::residual::analyze_residual;
+use validation::analysis::analyze_residual;
 
 /// A fit from the start with the data's delay estimate, and the same restart with the
 /// delay held at the model's value before it.
@@ -118,7 +119,7 @@ pub(super) fn common_denominator_start(
 /// The delay the first fit will hold when the data's own delay estimate is far enough
 /// from it to misplace its modes (a phase error above 0.05 rad, about 3 degrees, at the
 /// band's top line): then [`delay_restart`] is worth running beside the first fit
-/// (`crate::pipeline::run` does so in parallel). `None` when the first fit fits the
+/// ([`crate::run::run`] does so in parallel). `None` when the first fit fits the
 /// delay itself, the data have no delay estimate, or the two agree.
 pub fn worth_a_delay_restart(ctx: &FitContext) -> Option<f64> {
     let held = match ctx.delay {
@@ -190,8 +191,7 @@ fn delay_restarted(
     }
     // the delay candidates alone: the others' screening is the loop's work
     let calls_for_delay =
-        !super::candidate::delay_proposals(&first.model, &an, cfg.alpha, &[], ctx.data_delay_s())
-            .is_empty();
+        !delay_proposals(&first.model, &an, cfg.alpha, &[], ctx.data_delay_s()).is_empty();
     if !calls_for_delay {
         return Ok(unchanged(first));
     }
@@ -291,8 +291,9 @@ const MIN_RECOVERED: usize = 2;
 ///   modes for an undeclared delay, or fits a distorted measurement with the modes
 ///   its CMIF shows, lost none);
 /// - the start alone (no refinement: a second or two) must hold at least
-///   [`MIN_RECOVERED`] more lightly damped modes (damping below [`super::trial::LIGHT_DAMPING`]) in
-///   the band than the first fit, or the refinement is not run;
+///   [`MIN_RECOVERED`] more lightly damped modes (damping below
+///   [`super::refit::LIGHT_DAMPING`]) in the band than the first fit, or the refinement
+///   is not run;
 /// - the refined restart replaces the first fit when it still holds that many more, is
 ///   significantly better (the F test of [`better_first_fit`]) and also fits better
 ///   than the delay restart with its delay refined (that delay is the loop's `delay`

@@ -2,14 +2,18 @@
 //! current model, the missed modes also jointly, and a delay also by a refit from the
 //! start.
 
-use super::candidate::Proposal;
+use super::candidate::{Candidate, Proposal};
 use super::fitted::{FittedEffect, Refit};
-use crate::pipeline::{err, FitContext, PipelineConfig};
-use crate::FrfitError;
+use super::held_out::HeldOut;
+use super::refit::{
+    f_test, lacked_light_modes, model_cost, new_modes, refit, unstable_parts, Refitted,
+};
+use super::restart::{delay_restart, DelayRestart};
+use crate::pipeline::{FitContext, PipelineConfig};
+use additive_riv::residual_stats::{local_energy, ResidualStats};
 use additive_riv::riv::{iterate, RivConfig};
-use additive_riv::significance::{chi2_upper, f_statistic, noise_scale};
-use additive_riv::structure::{local_energy, AdaptConfig, ResidualStats};
-use additive_riv::{fit_numerators, AdditiveModel, FitData};
+use additive_riv::structure::AdaptConfig;
+use additive_riv::{AdditiveModel, FitData};
 use frf_data::ModelStructure;
 
 /// One tested candidate: the refitted model and its F test against the current model.
@@ -36,24 +40,24 @@ pub struct Trial {
     /// [`finish`] needs to continue it.
     pub screened: Option<Screened>,
     /// The candidate refitted, for a trial of one proposed candidate.
-    pub candidate: Option<super::Candidate>,
+    pub candidate: Option<Candidate>,
     /// Its check on interleaved held-out lines ([`super::held_out`]), when it was the
     /// round's best.
-    pub held_out: Option<super::held_out::HeldOut>,
+    pub held_out: Option<HeldOut>,
 }
 
 /// A candidate refit stopped at the screening cap ([`refit_candidate`] with `cap`).
 #[derive(Debug, Clone)]
 pub struct Screened {
     /// The candidate.
-    pub candidate: super::Candidate,
+    pub candidate: Candidate,
     /// The evidence that proposed it.
     pub evidence: String,
     /// Iterations run.
     pub iterations: usize,
     /// The cost decrease still to come, extrapolated from the refit's cost history
-    /// ([`remaining_decrease`]), in units of [`Trial::cost`]; `None` when its decreases
-    /// do not shrink.
+    /// ([`super::refit::remaining_decrease`]), in units of [`Trial::cost`]; `None` when
+    /// its decreases do not shrink.
     pub remaining: Option<f64>,
 }
 
@@ -69,90 +73,6 @@ impl Trial {
         self.evidence = format!("{}; {note}", self.evidence);
         self.f = self.f.min(self.f_crit * (1.0 - 1e-12));
     }
-}
-
-/// The weighted cost `sum w |E|^2` of `model` on `fd`.
-pub fn model_cost(model: &AdditiveModel, fd: &FitData) -> f64 {
-    additive_riv::complete::cost_of(model, fd)
-}
-
-/// The modes of `after` that are not in `before`: each mode of `before` takes the
-/// nearest unclaimed mode of `after` within 3 %, the rest are new.
-pub fn new_modes(before: &AdditiveModel, after: &AdditiveModel) -> Vec<(f64, f64)> {
-    let mut left: Vec<(f64, f64)> = after.modes().iter().map(|m| (m.f_hz, m.zeta)).collect();
-    for old in before.modes() {
-        let nearest = left
-            .iter()
-            .enumerate()
-            .filter(|(_, (f, _))| (f / old.f_hz - 1.0).abs() < 0.03)
-            .min_by(|a, b| {
-                (a.1 .0 - old.f_hz)
-                    .abs()
-                    .total_cmp(&(b.1 .0 - old.f_hz).abs())
-            })
-            .map(|(i, _)| i);
-        if let Some(i) = nearest {
-            left.remove(i);
-        }
-    }
-    left
-}
-
-/// The F test of a refit `model` that adds `added` real parameters and lowers the
-/// weighted cost from `before` to `after`: the cost explained per added parameter over
-/// the noise scale of the larger model, and its critical value at `cfg.alpha` with the
-/// effective number of parameters (correlated residuals), floored at `cfg.min_f`.
-/// Returns the residual statistics of `model` as well (the local tests use them).
-pub fn f_test(
-    model: &AdditiveModel,
-    fd: &FitData,
-    before: f64,
-    after: f64,
-    added: usize,
-    cfg: &PipelineConfig,
-) -> (ResidualStats, f64, f64) {
-    let stats = ResidualStats::new(model, fd);
-    let s2 = noise_scale(after, fd, model.n_params());
-    let f = f_statistic(before - after, added, s2);
-    let p_eff = stats.effective_params(added, fd.m());
-    let f_crit = (chi2_upper(p_eff, cfg.alpha) / p_eff).max(cfg.min_f);
-    (stats, f, f_crit)
-}
-
-/// Refits a candidate: numerators (eq. 24), then Algorithm 1 to a coarse tolerance.
-/// Returns the model, its cost, the iterations run and whether they converged (not
-/// stopped by the iteration cap).
-pub(super) fn refit(
-    model: AdditiveModel,
-    fd: &FitData,
-    riv: &RivConfig,
-) -> Result<Refitted, FrfitError> {
-    let mut m = model;
-    fit_numerators(&mut m, fd).map_err(err("refit"))?;
-    let f = iterate(m, fd, riv).map_err(err("refit"))?;
-    // a refit whose iterations failed (singular, no descent) before any step was taken
-    // did not fit the effect: its model is the start, not an estimate
-    if let (frf_data::Convergence::Failed { reason }, true) =
-        (&f.convergence, f.cost_history.len() <= 1)
-    {
-        return Err(FrfitError::Fit {
-            what: "refit".into(),
-            why: reason.clone(),
-        });
-    }
-    let capped = matches!(f.convergence, frf_data::Convergence::MaxIterations { .. });
-    let c = model_cost(&f.model, fd);
-    // the history's costs are the iterations' own scale: the extrapolated decrease is
-    // carried over as a fraction of the last one
-    let last = f.cost_history.last().copied().unwrap_or(f64::NAN);
-    let remaining = remaining_decrease(&f.cost_history).map(|r| r / last * c);
-    Ok(Refitted {
-        model: f.model,
-        cost: c,
-        iterations: f.iterations,
-        capped,
-        remaining,
-    })
 }
 
 /// A candidate's refit `model` that left modes or factors in the right half-plane,
@@ -184,8 +104,8 @@ fn without_redundant_parts(
     fd: &FitData,
     riv: &RivConfig,
 ) -> Option<(Refitted, String)> {
-    let before = super::accept::unstable_parts(current);
-    if super::accept::unstable_parts(model) <= before {
+    let before = unstable_parts(current);
+    if unstable_parts(model) <= before {
         return None;
     }
     let modes = model.modes();
@@ -233,7 +153,7 @@ fn without_redundant_parts(
         m.dynamics.remove(k);
     }
     let r = refit(m, fd, riv).ok()?;
-    if super::accept::unstable_parts(&r.model) > before {
+    if unstable_parts(&r.model) > before {
         return None;
     }
     let mut parts = Vec::new();
@@ -253,39 +173,6 @@ fn without_redundant_parts(
         parts.join(" and ")
     );
     Some((r, note))
-}
-
-/// A refit's result.
-pub(super) struct Refitted {
-    pub(super) model: AdditiveModel,
-    /// Its weighted cost.
-    pub(super) cost: f64,
-    pub(super) iterations: usize,
-    /// Whether it stopped at its iteration cap before converging.
-    pub(super) capped: bool,
-    /// The decrease still to come ([`remaining_decrease`]), in units of `cost`.
-    pub(super) remaining: Option<f64>,
-}
-
-/// The largest ratio of successive cost decreases [`remaining_decrease`] extrapolates
-/// with: decreases that shrink more slowly than this are not settling.
-const MAX_DECREASE_RATIO: f64 = 0.9;
-
-/// The cost decrease still to come of iterations stopped before convergence, from their
-/// cost `history`: the per-iteration decreases extrapolated as a geometric series with
-/// the ratio `r` of the last two, `d r / (1 - r)` for the last decrease `d`. `None` with
-/// fewer than three costs, a non-finite cost, or decreases that do not shrink (`r` above
-/// [`MAX_DECREASE_RATIO`], or a cost that rose): then nothing bounds what is left.
-pub fn remaining_decrease(history: &[f64]) -> Option<f64> {
-    let [.., a, b, c] = history else {
-        return None;
-    };
-    let (d1, d2) = (a - b, b - c);
-    if !(d1.is_finite() && d2.is_finite()) || d1 <= 0.0 || d2 < 0.0 {
-        return None;
-    }
-    let r = d2 / d1;
-    (r <= MAX_DECREASE_RATIO).then(|| d2 * r / (1.0 - r))
 }
 
 /// What every trial of a round is tested against.
@@ -350,31 +237,6 @@ pub fn joint_missed_modes(
         candidate: None,
         held_out: None,
     })
-}
-
-/// Damping below which a mode of the common-denominator start counts as a structural
-/// mode the model may lack ([`common_denominator_modes`] and the restart of a first fit
-/// that lost modes, [`super::restart`]): the poles a common denominator spends on an
-/// undeclared lag, feedthrough or delay are far more damped or lie beyond the band.
-pub(super) const LIGHT_DAMPING: f64 = 0.1;
-
-/// Whether a mode at `f_hz` with damping `zeta` is stable, lightly damped (below
-/// [`LIGHT_DAMPING`]) and inside `band_hz`.
-pub(super) fn light_in_band(f_hz: f64, zeta: f64, band_hz: (f64, f64)) -> bool {
-    zeta > 0.0 && zeta < LIGHT_DAMPING && f_hz >= band_hz.0 && f_hz <= band_hz.1
-}
-
-/// The lightly damped in-band modes ([`light_in_band`]) of `after` that `before` lacks
-/// ([`new_modes`]: none of its modes within 3 %), as `(f_hz, zeta)`.
-pub(super) fn lacked_light_modes(
-    before: &AdditiveModel,
-    after: &AdditiveModel,
-    band_hz: (f64, f64),
-) -> Vec<(f64, f64)> {
-    new_modes(before, after)
-        .into_iter()
-        .filter(|&(f, z)| light_in_band(f, z, band_hz))
-        .collect()
 }
 
 /// Missed modes from the common-denominator (Sanathanan-Koerner) start `sk`: its lightly
@@ -452,12 +314,12 @@ pub fn restart_with_delay(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     current: &Current,
-    restart: Option<super::restart::DelayRestart>,
+    restart: Option<DelayRestart>,
 ) -> Option<Trial> {
     let fd = &ctx.fit_data;
     let r = match restart {
         Some(r) => r,
-        None => super::restart::delay_restart(ctx, cfg, current.model.factor.delay_s)?,
+        None => delay_restart(ctx, cfg, current.model.factor.delay_s)?,
     };
     let (m, c) = (r.with_delay, r.with_delay_cost);
     if c >= current.cost {
@@ -581,7 +443,7 @@ pub fn suspended_body(
     let Refitted { model: m, cost, .. } = refit(aug, fd, riv).ok()?;
     let removed = current.model.n_params().saturating_sub(m.n_params()).max(1);
     let (_, f, f_crit) = f_test(current.model, fd, cost, current.cost, removed, cfg);
-    let stable = super::accept::unstable_parts(&m) <= super::accept::unstable_parts(current.model);
+    let stable = unstable_parts(&m) <= unstable_parts(current.model);
     let accepted = f <= f_crit && stable;
     let verdict = if accepted {
         "not significant: the body on its suspension is kept"
@@ -645,14 +507,14 @@ fn judge(
     cfg: &PipelineConfig,
     fd: &FitData,
     current: &Current,
-    candidate: &super::Candidate,
+    candidate: &Candidate,
     mut evidence: String,
     m: AdditiveModel,
     c: f64,
 ) -> Trial {
     let added = m.n_params().saturating_sub(current.model.n_params()).max(1);
     let (stats, mut f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
-    if let super::Candidate::MissedMode { peak_hz: fp, .. } = candidate {
+    if let Candidate::MissedMode { peak_hz: fp, .. } = candidate {
         let half = 0.01 * fp;
         let ratio = local_energy(&stats, fd, *fp, half)
             / local_energy(current.stats, fd, *fp, half).max(f64::MIN_POSITIVE);
@@ -694,13 +556,13 @@ fn judge(
 /// `delay` (one parameter) explains more simply (on the simulated stage with a common
 /// lag and an undeclared delay, such a twin at 2.7 kHz took the delay's place).
 pub fn test_zeros(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConfig, current: &Current) {
-    let stable = super::accept::unstable_parts(current.model);
-    let siblings: Vec<(String, f64, validation::residual::Effect)> = trials
+    let stable = unstable_parts(current.model);
+    let siblings: Vec<(String, f64, validation::analysis::Effect)> = trials
         .iter()
         .filter_map(|t| {
             let c = t.candidate.as_ref()?;
             let start = c.factor_start()?;
-            (start.zeros.is_none() && super::accept::unstable_parts(&t.model) <= stable)
+            (start.zeros.is_none() && unstable_parts(&t.model) <= stable)
                 .then(|| (c.key(), t.cost, c.effect()))
         })
         .collect();
@@ -783,7 +645,7 @@ pub const FAR_POLE_OVER_TOP: f64 = 100.0;
 pub fn test_far_poles(trials: &mut [Trial], fd: &FitData) {
     let f_far = FAR_POLE_OVER_TOP * fd.band_hz.1;
     // (effect, support) of the passing first-order all-pole factors
-    let first_order: Vec<(validation::residual::Effect, String)> = trials
+    let first_order: Vec<(validation::analysis::Effect, String)> = trials
         .iter()
         .filter(|t| t.passes())
         .filter_map(|t| {
@@ -828,7 +690,7 @@ pub fn test_far_poles(trials: &mut [Trial], fd: &FitData) {
 }
 
 /// The support part of a dynamics factor candidate's key (`3` for input or output 4,
-/// `all` for a common factor), see [`super::Candidate::key`].
+/// `all` for a common factor), see [`Candidate::key`].
 fn support_of(key: &str) -> String {
     key.split(':').next().unwrap_or_default().to_string()
 }
@@ -854,7 +716,7 @@ pub fn mode_or_suspension(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConf
     let beside_body = |t: &Trial| {
         matches!(
             t.candidate,
-            Some(super::Candidate::MissedMode {
+            Some(Candidate::MissedMode {
                 body_integrators: Some(_),
                 ..
             })
@@ -863,7 +725,7 @@ pub fn mode_or_suspension(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConf
     let suspension = |t: &Trial| {
         matches!(
             t.candidate,
-            Some(super::Candidate::Stiffness { replaces: None, .. })
+            Some(Candidate::Stiffness { replaces: None, .. })
         )
     };
     let Some(si) = trials.iter().position(|t| suspension(t) && t.passes()) else {
@@ -903,29 +765,5 @@ pub fn mode_or_suspension(trials: &mut [Trial], fd: &FitData, cfg: &PipelineConf
         for t in trials.iter_mut().filter(|t| beside_body(t)) {
             t.hold_back(&note);
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::remaining_decrease;
-
-    #[test]
-    fn a_geometric_cost_history_extrapolates_to_its_limit() {
-        // costs 1 + 8 (1/2)^k: decreases 4, 2, 1, ... sum to 8 from the start
-        let history: Vec<f64> = (0..4).map(|k| 1.0 + 8.0 * 0.5_f64.powi(k)).collect();
-        let left = remaining_decrease(&history).unwrap();
-        let limit = history[3] - 1.0;
-        assert!((left - limit).abs() < 1e-12, "{left} vs {limit}");
-    }
-
-    #[test]
-    fn decreases_that_do_not_shrink_bound_nothing() {
-        assert_eq!(remaining_decrease(&[10.0, 9.0, 8.0]), None);
-        assert_eq!(remaining_decrease(&[10.0, 9.0, 9.5]), None);
-        assert_eq!(remaining_decrease(&[10.0, 9.0]), None);
-        assert_eq!(remaining_decrease(&[10.0, f64::NAN, 8.0]), None);
-        // converged: nothing left
-        assert_eq!(remaining_decrease(&[10.0, 9.0, 9.0]), Some(0.0));
     }
 }

@@ -3,7 +3,8 @@
 //! level, the CMIF, the weighted fit data, the data's own delay estimate and the
 //! angular frequencies.
 
-use super::{err, FrfType, PipelineConfig, Timings};
+use super::config::{err, FrfType, PipelineConfig, Timings};
+use super::interleave::halves;
 use crate::declared::{declared, Declared};
 use crate::FrfitError;
 use additive_riv::riv::RivConfig;
@@ -55,7 +56,7 @@ pub struct FitContext {
     /// CMIF of the band, computed on first use ([`cmif`](Self::cmif)): the CMIF start and
     /// the report read it, a subspace start does not (at 50 x 50 entries it costs
     /// seconds and hundreds of MB).
-    pub(super) cmif: OnceLock<Arc<Cmif>>,
+    pub(crate) cmif: OnceLock<Arc<Cmif>>,
     /// The fit data split into their even and odd lines, made on first use
     /// ([`held_out_halves`](Self::held_out_halves)).
     held_out_halves: OnceLock<Arc<[FitData; 2]>>,
@@ -83,8 +84,9 @@ pub struct FitContext {
 }
 
 impl FitContext {
-    /// The setup of [`super::run`] on `data`: the band, the declarations, the hold and
-    /// the delay, then the noise level, CMIF, fit data and delay estimate of the band.
+    /// The setup of a run ([`crate::run::run`]) on `data`: the band, the declarations,
+    /// the hold and the delay, then the noise level, CMIF, fit data and delay estimate of
+    /// the band.
     ///
     /// Fails when the band is empty or outside the data, or when the noise level, the
     /// CMIF or the fit data cannot be formed (non-finite values, all-zero weights).
@@ -242,12 +244,12 @@ impl FitContext {
         cmif_once(&self.cmif, &self.band)
     }
 
-    /// The fit data split into their even and their odd lines, for the diagnosis's
-    /// check of a step on held-out lines ([`crate::diagnose::held_out`]): made on the
-    /// first call and kept (a copy of the fit data, so not made per round).
+    /// The fit data split into their even and their odd lines ([`halves`]), for the
+    /// diagnosis's check of a step on held-out lines ([`crate::diagnose::held_out`]):
+    /// made on the first call and kept (a copy of the fit data, so not made per round).
     pub fn held_out_halves(&self) -> &[FitData; 2] {
         self.held_out_halves
-            .get_or_init(|| Arc::new(crate::diagnose::held_out::halves(&self.fit_data)))
+            .get_or_init(|| Arc::new(halves(&self.fit_data)))
     }
 
     /// The noise level the diagnosis loop judges residuals against: the measured (or
@@ -348,7 +350,7 @@ impl FitContext {
 
 /// The CMIF of `band` kept in `cell`: computed on the first call, read afterwards (the
 /// context and the run's output hold the same cell).
-pub(super) fn cmif_once<'a>(
+pub(crate) fn cmif_once<'a>(
     cell: &'a OnceLock<Arc<Cmif>>,
     band: &Frf,
 ) -> Result<&'a Arc<Cmif>, FrfitError> {

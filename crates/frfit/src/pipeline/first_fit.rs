@@ -1,7 +1,9 @@
 //! The first fit of a run: the model the diagnosis loop starts from (and, for
 //! `frfit fit`, the result).
 
-use super::{err, FitContext, PipelineConfig};
+use super::config::{default_chain, err, PipelineConfig};
+use super::context::FitContext;
+use super::summarize::error_stats;
 use crate::chain::{run_chain, AdditiveOptions};
 use crate::FrfitError;
 use additive_riv::chain::PROPORTIONAL_RESIDUE_TOL;
@@ -54,7 +56,7 @@ pub fn first_fit(ctx: &FitContext, cfg: &PipelineConfig) -> Result<FirstFit, Frf
 
 /// The model `frfit fit` ends with on the band of `ctx` with the options of `cfg`
 /// (its delay handling, the SK second start and the first fit's mode completion),
-/// quietly: what a diagnosis must not end worse than (see [`crate::pipeline::run`]).
+/// quietly: what a diagnosis must not end worse than (see [`crate::run::run`]).
 /// `None` when the run starts from a given model (there the two agree).
 pub fn fit_reference(
     ctx: &FitContext,
@@ -121,7 +123,7 @@ fn second_start(
     let converged = !did_not_converge(&first.fit.convergence);
     // `fit` has no loop to trace a residual far above the noise: a start that left it
     // there is poor too
-    let residual_to_noise = super::error_stats(
+    let residual_to_noise = error_stats(
         &ctx.band,
         &first.fit.model.response_at(&ctx.omega),
         &ctx.noise,
@@ -203,7 +205,7 @@ fn start_fitter_config(
 
 /// The chain's record (cost, parameters, final prediction error) of a fit, unkept.
 fn chain_run_of(fd: &additive_riv::FitData, f: &FirstFit) -> crate::chain::ChainRun {
-    let cost = additive_riv::complete::cost_of(&f.fit.model, fd);
+    let cost = additive_riv::residual_stats::cost_of(&f.fit.model, fd);
     let p = frf_data::ModelStructure::n_params(&f.fit.model);
     crate::chain::ChainRun {
         chain: f.chain.clone(),
@@ -348,7 +350,7 @@ pub fn chain_fit(
     cfg: &PipelineConfig,
     fc: &additive_riv::FitterConfig,
 ) -> Result<FirstFit, FrfitError> {
-    let (init, refine) = super::default_chain(
+    let (init, refine) = default_chain(
         &cfg.init,
         &cfg.refine,
         frf_data::FrfDataset::ny(&ctx.band) * frf_data::FrfDataset::nu(&ctx.band),

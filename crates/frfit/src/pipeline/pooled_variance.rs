@@ -107,7 +107,7 @@ pub fn pool_variance(band: Frf, decl: &Declared) -> Result<(Frf, Option<Pooled>)
     };
     let band = band
         .with_variance(Some(pooled))
-        .map_err(super::err("pooled variance"))?;
+        .map_err(super::config::err("pooled variance"))?;
     Ok((band, Some(how)))
 }
 

@@ -1,15 +1,15 @@
 //! The summary of a run (`summary.json`): the error statistics of a model against the
 //! data, the final model briefly, and the verdict from the final residual analysis.
 
-use super::{FitContext, PipelineConfig};
-use crate::diagnose::effect_name;
+use super::config::{PipelineConfig, NOT_ANALYSED};
+use super::context::FitContext;
 use crate::summary::*;
 use additive_riv::{AdditiveModel, FactorTarget, FitterReport, SubmodelKind};
 use frf_data::{Fit, Frf, FrfDataset};
 use realize::ResponseGrid;
+use validation::analysis::ResidualAnalysis;
 use validation::distortion::residual_ratio;
 use validation::noise::{NoiseLevel, NoiseSource};
-use validation::residual::ResidualAnalysis;
 
 /// Error statistics of `model` against `data` with `noise`.
 pub(crate) fn error_stats(data: &Frf, response: &ResponseGrid, noise: &NoiseLevel) -> ErrorStats {
@@ -344,7 +344,7 @@ pub(crate) struct RunRecord<'a> {
     pub chain_runs: Vec<crate::chain::ChainRun>,
     /// The refiner's uncertainty of the final model, when it has one.
     pub uncertainty: Option<UncertaintySummary>,
-    /// The diagnosis ran again from `fit`'s model ([`super::from_fit`]).
+    /// The diagnosis ran again from `fit`'s model (`crate::run`'s `from_fit`).
     pub from_fit: Option<crate::summary::FromFitSummary>,
 }
 
@@ -447,7 +447,7 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
             ctx.nonlinear.as_ref(),
         ),
         None => (
-            super::NOT_ANALYSED,
+            NOT_ANALYSED,
             "the final residual analysis was not run (`frfit fit` without `--report`)".into(),
         ),
     };

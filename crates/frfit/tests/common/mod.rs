@@ -264,12 +264,7 @@ pub fn simulate(sim: &Sim) -> (Frf, Frf, f64) {
 
 /// The median over lines and entries of `|P - G| / |G|`: the final model of `out`
 /// against the exact response `clean`, on `clean`'s lines in `lo..hi` Hz.
-pub fn median_rel_vs_truth(
-    out: &frfit::pipeline::PipelineOutput,
-    clean: &Frf,
-    lo: f64,
-    hi: f64,
-) -> f64 {
+pub fn median_rel_vs_truth(out: &frfit::run::PipelineOutput, clean: &Frf, lo: f64, hi: f64) -> f64 {
     use frf_data::{FrfDataset, ModelStructure};
     let clean = clean.band(lo, hi).unwrap();
     let g = out.fit.model.response(&clean);
@@ -286,7 +281,7 @@ pub fn median_rel_vs_truth(
 
 /// Prints the first fit's errors, every step of the diagnosis of `out` and its verdict,
 /// under `name`.
-pub fn print_steps(name: &str, out: &frfit::pipeline::PipelineOutput) {
+pub fn print_steps(name: &str, out: &frfit::run::PipelineOutput) {
     let s = &out.summary;
     println!("{name}: initial {:?}", s.initial.errors);
     for st in &s.steps {
@@ -317,12 +312,7 @@ pub fn print_steps(name: &str, out: &frfit::pipeline::PipelineOutput) {
 
 /// The one accepted second-order `output_dynamics` step of `out`: on output `row`
 /// (1-based), at `f_r` (within 1 %) with damping `zeta` (within 10 %).
-pub fn assert_output_resonance(
-    out: &frfit::pipeline::PipelineOutput,
-    row: usize,
-    f_r: f64,
-    zeta: f64,
-) {
+pub fn assert_output_resonance(out: &frfit::run::PipelineOutput, row: usize, f_r: f64, zeta: f64) {
     let steps = accepted(out, "output_dynamics");
     assert_eq!(steps.len(), 1, "one output_dynamics step");
     let p = &steps[0].params;
@@ -344,7 +334,7 @@ pub fn assert_output_resonance(
 /// The accepted steps of `out` that add `effect`, except those a later step took out of
 /// the model (`superseded_by`).
 pub fn accepted<'a>(
-    out: &'a frfit::pipeline::PipelineOutput,
+    out: &'a frfit::run::PipelineOutput,
     effect: &str,
 ) -> Vec<&'a frfit::summary::StepSummary> {
     out.summary
@@ -360,14 +350,14 @@ pub fn diagnose(
     data: &Frf,
     name: &str,
     modes: additive_riv::ModeSelection,
-) -> frfit::pipeline::PipelineOutput {
+) -> frfit::run::PipelineOutput {
     let cfg = frfit::pipeline::PipelineConfig {
         diagnose: true,
         modes,
         ..Default::default()
     };
     let t = std::time::Instant::now();
-    let out = frfit::pipeline::run(data, name, &cfg, "diagnose").unwrap();
+    let out = frfit::run::run(data, name, &cfg, "diagnose").unwrap();
     print_steps(name, &out);
     println!("  diagnosis took {:.1} s", t.elapsed().as_secs_f64());
     out

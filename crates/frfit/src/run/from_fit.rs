@@ -5,22 +5,22 @@
 //! missed mode is found as a step. On measured data that start can be far poorer than
 //! the model `frfit fit` ends with (a fitted delay, the second start's common
 //! denominator, the first fit's completed modes), and the loop, which only adds effects
-//! that pass their tests, may not climb back. [`crate::pipeline::run`] therefore compares
-//! the diagnosis's final model with `fit`'s model ([`super::fit_reference`]); when the
+//! that pass their tests, may not climb back. [`crate::run::run`] therefore compares
+//! the diagnosis's final model with `fit`'s model ([`fit_reference`]); when the
 //! diagnosis ends worse than it ([`ends_worse`]), the diagnosis runs again from `fit`'s
 //! model, and when even that ends worse, `fit`'s model is the final one. The summary
 //! says so ([`FromFitSummary`]). A diagnosis whose residual is at the noise level it is
 //! judged against needs no comparison (no model is significantly better on the data):
 //! `fit`'s model is then not fitted at all.
 
-use super::{err, error_stats, FirstFit, FitContext, PipelineConfig};
 use crate::diagnose::{diagnose, Diagnosis};
+use crate::pipeline::{err, error_stats, fit_reference, FirstFit, FitContext, PipelineConfig};
 use crate::summary::{ErrorStats, FromFitSummary};
 use crate::FrfitError;
 use additive_riv::AdditiveModel;
 use frf_data::ModelStructure;
 use realize::ResponseGrid;
-use validation::residual::analyze_residual;
+use validation::analysis::analyze_residual;
 
 /// A model's weighted cost on the band, its parameters and its error statistics.
 #[derive(Debug, Clone, Copy)]
@@ -37,7 +37,7 @@ impl Standing {
     /// The standing of `model` (whose response at the band's lines is `response`).
     pub fn of(ctx: &FitContext, model: &AdditiveModel, response: &ResponseGrid) -> Self {
         Self {
-            cost: additive_riv::complete::cost_of(model, &ctx.fit_data),
+            cost: additive_riv::residual_stats::cost_of(model, &ctx.fit_data),
             n_params: model.n_params(),
             errors: error_stats(&ctx.band, response, &ctx.noise),
         }
@@ -125,7 +125,7 @@ pub struct FromFit {
 /// Keeps `diagnosis` when its final residual is at the noise level it is judged against
 /// (no model can then be significantly better on the data) or when it ends no worse
 /// ([`ends_worse`]) than `frfit fit`'s model on the same band and options
-/// ([`super::fit_reference`], fitted here only when needed). Otherwise runs the diagnosis
+/// ([`fit_reference`], fitted here only when needed). Otherwise runs the diagnosis
 /// again from `fit`'s model and returns it, with that model as its start. When that
 /// second diagnosis ends worse than `fit`'s model too (its loop's guard compares weighted
 /// costs only), `fit`'s model itself is its final model and its messages say why.
@@ -152,7 +152,7 @@ pub fn from_fit_if_worse(
         return Ok(kept(diagnosis, final_response));
     }
     // `None`: a given start model (the two agree)
-    let reference = match super::fit_reference(ctx, cfg) {
+    let reference = match fit_reference(ctx, cfg) {
         None => return Ok(kept(diagnosis, final_response)),
         Some(Err(e)) => {
             diagnosis.fit.messages.push(format!(
