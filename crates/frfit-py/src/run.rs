@@ -255,7 +255,7 @@ impl Step {
     /// `output_dynamics`, ...
     #[getter]
     fn effect(&self) -> String {
-        self.s.effect.clone()
+        self.s.effect().to_string()
     }
     /// Whether the effect was added to the model.
     #[getter]
@@ -270,7 +270,7 @@ impl Step {
     /// Its estimated parameters (a dict).
     #[getter]
     fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        to_python(py, &self.s.params)
+        to_python(py, &self.s.fitted.params_json())
     }
     /// Standard deviations of the parameters, where available (a dict), or `None`.
     #[getter]
@@ -317,7 +317,7 @@ impl Step {
     fn __repr__(&self) -> String {
         format!(
             "Step({}, {}, F={:.3e} (crit {:.3}), median rel {:.3e} -> {:.3e})",
-            self.s.effect,
+            self.s.effect(),
             if self.s.accepted {
                 "accepted"
             } else {

@@ -11,6 +11,7 @@ pub mod chain;
 pub mod data;
 pub mod declared;
 pub mod diagnose;
+pub mod effects;
 pub mod error;
 pub mod export;
 pub mod nonparametric;

@@ -25,6 +25,7 @@
 //! (first, lowest, highest and last point of each column), so resonance peaks survive and
 //! the 4 x 13 wafer-stage report takes a fraction of a second.
 
+use crate::effects::Repair;
 use crate::plots::{cmif_plot, Axis, LinePlot, Marker, Series, SharedGrid, PALETTE};
 use crate::summary::{DistortionSummary, ErrorStats, StepSummary, Summary};
 use crate::FrfitError;
@@ -229,7 +230,13 @@ pub fn write_report(
                 .with_color(DATA_COLOR)
                 .with_width(2),
         );
-        let marked = mark_frequencies(&mut plot, &step.params, &freqs, &b.per_line, &a.per_line);
+        let marked = mark_frequencies(
+            &mut plot,
+            &step.fitted.params_json(),
+            &freqs,
+            &b.per_line,
+            &a.per_line,
+        );
         add_reference(&mut plot, data, &freqs, var.is_some());
         headroom(&mut plot);
         plot.write_svg(&path, (1000, 440))?;
@@ -348,7 +355,7 @@ fn step_file_name(i: usize, step: &StepSummary) -> String {
 /// `step_{i+1}_{effect}.svg` with the effect reduced to `[a-z0-9_]`.
 fn default_step_file_name(i: usize, step: &StepSummary) -> String {
     let effect: String = step
-        .effect
+        .effect()
         .chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() {
@@ -843,18 +850,25 @@ fn entry_svg(path: &Path, input: &ReportInput, fin: &Residual) -> Result<String,
     ))
 }
 
+/// A step's standard deviations as the JSON object [`fmt_params`] reads.
+fn uncertainty_json(step: &StepSummary) -> Option<Value> {
+    step.uncertainty
+        .as_ref()
+        .and_then(|u| serde_json::to_value(u).ok())
+}
+
 fn step_title(i: usize, step: &StepSummary) -> String {
     let mut t = format!(
         "Step {}: {} ({})",
         i + 1,
-        step.effect,
+        step.effect(),
         if step.accepted {
             "accepted"
         } else {
             "rejected"
         }
     );
-    let params = fmt_params(&step.params, None);
+    let params = fmt_params(&step.fitted.params_json(), None);
     if !params.is_empty() {
         t.push_str(": ");
         t.push_str(&params);
@@ -1227,25 +1241,17 @@ fn markdown(
             .initial
             .repairs
             .iter()
-            .map(|r| {
-                let p = &r.params;
-                let hz =
-                    |v: &serde_json::Value| v.as_f64().map_or("?".into(), |f| format!("{f:.2}"));
-                match r.effect.as_str() {
-                    "out_of_band_mode" => format!(
-                        "`out_of_band_mode` at {} Hz (zeta {}, beyond the {} edge; F = {:.1})",
-                        hz(&p["f_hz"]),
-                        p["zeta"].as_f64().map_or("?".into(), |z| format!("{z:.4}")),
-                        p["edge"].as_str().unwrap_or("?"),
-                        r.f_statistic
-                    ),
-                    _ => format!(
-                        "`{}`: the mode at {} Hz split in two (F = {:.1})",
-                        r.effect,
-                        hz(&p["from_hz"]),
-                        r.f_statistic
-                    ),
-                }
+            .map(|r| match &r.repair {
+                Repair::OutOfBandMode {
+                    f_hz, zeta, edge, ..
+                } => format!(
+                    "`out_of_band_mode` at {f_hz:.2} Hz (zeta {zeta:.4}, beyond the {edge} edge; F = {:.1})",
+                    r.f_statistic
+                ),
+                Repair::ClosePair { from_hz, .. } => format!(
+                    "`close_pair`: the mode at {from_hz:.2} Hz split in two (F = {:.1})",
+                    r.f_statistic
+                ),
             })
             .collect();
         let _ = writeln!(
@@ -1344,12 +1350,12 @@ fn markdown(
         );
         let _ = writeln!(md, "|---:|---|---|---|---|---:|---:|---:|---:|");
         for (i, t) in s.steps.iter().enumerate() {
-            let params = fmt_params(&t.params, t.uncertainty.as_ref());
+            let params = fmt_params(&t.fitted.params_json(), uncertainty_json(t).as_ref());
             let _ = writeln!(
                 md,
                 "| {} | {} | {} | {} | {} | {} ({}, {} param{}) | {} | {} | {} |",
                 i + 1,
-                cell(&t.effect),
+                cell(t.effect()),
                 added_cell(t),
                 cell(t.evidence.trim()),
                 cell(if params.is_empty() { "none" } else { &params }),
@@ -1369,7 +1375,7 @@ fn markdown(
                 md,
                 "### Step {}: {} ({})\n",
                 i + 1,
-                t.effect,
+                t.effect(),
                 match (t.accepted, t.superseded_by) {
                     (true, Some(n)) => format!("accepted, removed at step {n}"),
                     (true, None) => "accepted".into(),
@@ -1377,7 +1383,7 @@ fn markdown(
                 }
             );
             let _ = writeln!(md, "{}\n", t.evidence.trim());
-            let params = fmt_params(&t.params, t.uncertainty.as_ref());
+            let params = fmt_params(&t.fitted.params_json(), uncertainty_json(t).as_ref());
             if !params.is_empty() {
                 let _ = writeln!(md, "Parameters: {params}.\n");
             }
@@ -1398,13 +1404,13 @@ fn markdown(
             } else {
                 "residual |G - P| per line (rms over entries; no variance known)"
             };
-            let _ = writeln!(md, "![step {}: {}]({file})\n", i + 1, t.effect);
+            let _ = writeln!(md, "![step {}: {}]({file})\n", i + 1, t.effect());
             let _ = writeln!(
                 md,
                 "*Fig. {}. Step {}: {what} before (orange) and after (blue) the refit with {}{}.*\n",
                 fig0 + i + 1,
                 i + 1,
-                t.effect,
+                t.effect(),
                 if *marked {
                     "; the dashed red line marks its frequency"
                 } else {

@@ -31,8 +31,9 @@
 //! ```text
 //! ```
 
+pub use crate::effects::effect_name;
+use crate::effects::{FittedEffect, Repair};
 use serde::{Deserialize, Serialize};
-use validation::analysis::Effect;
 
 /// The schema tag.
 pub const SCHEMA: &str = "frfit-summary";
@@ -157,46 +158,29 @@ pub struct FromFitSummary {
 /// One repair of the first fit's modal structure.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RepairSummary {
-    /// `out_of_band_mode` or `close_pair`.
-    pub effect: String,
-    /// Its parameters: `f_hz`, `zeta`, `edge` (and `feedthrough_cost_ratio`, the cost of
-    /// a feedthrough in its place over its own) for an out-of-band mode; `from_hz` and
-    /// `modes` (`[{f_hz, zeta}, {f_hz, zeta}]`) for a close pair.
-    pub params: serde_json::Value,
+    /// The repair and its parameters (`effect`: `out_of_band_mode` or `close_pair`,
+    /// `params`: `f_hz`, `zeta`, `edge`, `feedthrough_cost_ratio` for an out-of-band
+    /// mode; `from_hz` and `modes` (`[{f_hz, zeta}, {f_hz, zeta}]`) for a close pair).
+    #[serde(flatten)]
+    pub repair: Repair,
     /// F statistic of the added mode's parameters.
     pub f_statistic: f64,
-}
-
-/// The summary name of an effect (`missed_mode`, `delay`, ...): the `effect` of a step
-/// ([`StepSummary::effect`]).
-pub fn effect_name(e: Effect) -> &'static str {
-    match e {
-        Effect::MissedMode => "missed_mode",
-        Effect::Delay => "delay",
-        Effect::Hold => "hold",
-        Effect::Feedthrough => "feedthrough",
-        Effect::Stiffness => "stiffness",
-        Effect::InputDynamics => "input_dynamics",
-        Effect::OutputDynamics => "output_dynamics",
-    }
 }
 
 /// One step of the diagnosis loop: a candidate effect, tested.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StepSummary {
-    /// `missed_mode`, `delay`, `hold`, `feedthrough`, `stiffness`, `input_dynamics` or
-    /// `output_dynamics` ([`effect_name`]).
-    pub effect: String,
+    /// The effect and its parameters as fitted (`effect`: `missed_mode`, `delay`,
+    /// `hold`, `feedthrough`, `stiffness`, `input_dynamics` or `output_dynamics`;
+    /// `params`: `f_hz`, `zeta`; `seconds`; `fs_hz`; `inputs`, `poles`...).
+    #[serde(flatten)]
+    pub fitted: FittedEffect,
     /// Whether the effect was added to the model.
     pub accepted: bool,
     /// Why the effect was a candidate (what the residual showed), in words with numbers.
     pub evidence: String,
-    /// Its estimated parameters (`f_hz`, `zeta`; `seconds`; `fs_hz`; `inputs`, `poles`...).
-    /// The pipeline writes them from [`crate::diagnose::FittedEffect`]; any JSON object
-    /// is shown by the report.
-    pub params: serde_json::Value,
-    /// Standard deviations of the parameters where available.
-    pub uncertainty: Option<serde_json::Value>,
+    /// Standard deviations of the parameters where available, by parameter name.
+    pub uncertainty: Option<std::collections::BTreeMap<String, f64>>,
     /// F statistic of the refit (the cost explained per added parameter over the noise
     /// scale).
     pub f_statistic: f64,
@@ -220,6 +204,13 @@ pub struct StepSummary {
     /// raises it is not accepted).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<HeldOutSummary>,
+}
+
+impl StepSummary {
+    /// The effect's summary name (`missed_mode`, `delay`, ...).
+    pub fn effect(&self) -> &'static str {
+        self.fitted.name()
+    }
 }
 
 /// A step's check on interleaved held-out lines: the model before and after the step,
@@ -407,5 +398,105 @@ impl UncertaintySummary {
             .filter(|m| (m.f_hz - f_hz).abs() <= 1e-6 * f_hz.abs())
             .min_by(|a, b| (a.f_hz - f_hz).abs().total_cmp(&(b.f_hz - f_hz).abs()))
             .map(|m| (m.f_hz_std, m.zeta_std))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::{FactorSupport, ModeParams, PoleParams, Refit};
+
+    fn step(fitted: FittedEffect) -> StepSummary {
+        let e = ErrorStats {
+            median_rel: 1e-3,
+            p95_rel: 1e-2,
+            residual_to_noise: 1.1,
+        };
+        StepSummary {
+            fitted,
+            accepted: true,
+            evidence: "why".into(),
+            uncertainty: Some([("f_hz".to_string(), 0.5)].into()),
+            f_statistic: 40.0,
+            f_critical: 3.0,
+            added_params: 2,
+            before: e,
+            after: e,
+            figure: None,
+            superseded_by: None,
+            held_out: None,
+        }
+    }
+
+    /// Each effect is written as its `effect` name and `params` object, the schema of
+    /// `summary.json`, and read back as the same typed effect, also where two effects
+    /// have the same parameter names (a missed mode and a stiffness).
+    #[test]
+    fn steps_and_repairs_round_trip_through_their_json_schema() {
+        let effects = [
+            FittedEffect::MissedMode {
+                f_hz: 120.0,
+                zeta: 0.02,
+            },
+            FittedEffect::Stiffness {
+                f_hz: 3.0,
+                zeta: 0.1,
+            },
+            FittedEffect::Delay {
+                seconds: 1e-5,
+                total_delay_s: 1.2e-4,
+                refit: Some(Refit::FromTheStart),
+            },
+            FittedEffect::Hold {
+                fs_hz: 1e4,
+                remaining_delay_s: 0.0,
+            },
+            FittedEffect::Feedthrough {
+                rms: 0.3,
+                bypasses_delay: true,
+            },
+            FittedEffect::OutputDynamics {
+                outputs: vec![2],
+                support: FactorSupport::Outputs,
+                order: 2,
+                poles: vec![PoleParams {
+                    f_hz: 1700.0,
+                    zeta: Some(0.05),
+                    re: None,
+                    im: None,
+                }],
+                zeros: Vec::new(),
+                non_minimum_phase: None,
+            },
+        ];
+        for e in effects {
+            let s = step(e.clone());
+            let v = serde_json::to_value(&s).unwrap();
+            assert_eq!(v["effect"], e.name());
+            assert!(v["params"].is_object(), "{v}");
+            assert_eq!(v["params"], e.params_json());
+            let back: StepSummary = serde_json::from_value(v).unwrap();
+            assert_eq!(back, s);
+        }
+        let r = RepairSummary {
+            repair: Repair::ClosePair {
+                from_hz: 636.6,
+                modes: [
+                    ModeParams {
+                        f_hz: 636.0,
+                        zeta: 0.01,
+                    },
+                    ModeParams {
+                        f_hz: 637.2,
+                        zeta: 0.012,
+                    },
+                ],
+            },
+            f_statistic: 80.0,
+        };
+        let v = serde_json::to_value(&r).unwrap();
+        assert_eq!(v["effect"], "close_pair");
+        assert_eq!(v["params"]["modes"][1]["f_hz"], 637.2);
+        assert_eq!(serde_json::from_value::<RepairSummary>(v).unwrap(), r);
     }
 }

@@ -52,7 +52,7 @@ fn nominal_adds_nothing_beyond_the_hold() {
         return;
     };
     for st in out.summary.steps.iter().filter(|s| s.accepted) {
-        assert_eq!(st.effect, "hold", "unexpected discovery {st:?}");
+        assert_eq!(st.effect(), "hold", "unexpected discovery {st:?}");
     }
     assert_eq!(out.summary.verdict, "noise_limited");
     assert_at_noise_level(&out);
@@ -75,7 +75,7 @@ fn extra_delay_is_found() {
     };
     let delays = common::accepted(&out, "delay");
     assert_eq!(delays.len(), 1, "one delay step");
-    let seconds = delays[0].params["seconds"].as_f64().unwrap();
+    let seconds = delays[0].fitted.params_json()["seconds"].as_f64().unwrap();
     assert!(
         (seconds - 60e-6).abs() <= 5e-6,
         "extra delay {:.2} us, declared effect 60 us",
@@ -96,7 +96,7 @@ fn hidden_mode_is_held_by_the_final_model() {
     let near = |f: f64| (f / f_hidden - 1.0).abs() <= 0.005;
     let in_loop = common::accepted(&out, "missed_mode")
         .iter()
-        .any(|s| near(s.params["f_hz"].as_f64().unwrap()));
+        .any(|s| near(s.fitted.params_json()["f_hz"].as_f64().unwrap()));
     let in_initial = out.summary.initial.modes.iter().any(|m| near(m.f_hz));
     println!("hidden mode: found by the loop {in_loop}, picked at once {in_initial}");
     assert!(in_loop || in_initial);
@@ -186,13 +186,15 @@ fn lag_is_found(
     let out = diagnose_frf(&with_lag(&data, column, row, fc), name, cfg);
     let steps = common::accepted(&out, effect);
     assert_eq!(steps.len(), 1, "{name}: one {effect} step");
-    let which = steps[0].params[key][0].as_u64().unwrap() as usize;
+    let which = steps[0].fitted.params_json()[key][0].as_u64().unwrap() as usize;
     assert_eq!(
         Some(which - 1),
         column.or(row),
         "{name}: the lagged channel"
     );
-    let pole = steps[0].params["poles"][0]["f_hz"].as_f64().unwrap();
+    let pole = steps[0].fitted.params_json()["poles"][0]["f_hz"]
+        .as_f64()
+        .unwrap();
     assert!(
         (pole / fc - 1.0).abs() < 0.02,
         "{name}: lag at {pole:.1} Hz, made at {fc}"
@@ -252,7 +254,9 @@ fn undeclared_delay_and_hold_are_found() {
         .all(|d| !d.contains("delay")));
     let delay = common::accepted(&out, "delay");
     assert_eq!(delay.len(), 1);
-    let total = delay[0].params["total_delay_s"].as_f64().unwrap();
+    let total = delay[0].fitted.params_json()["total_delay_s"]
+        .as_f64()
+        .unwrap();
     assert!((total - 150e-6).abs() < 5e-6, "delay {:.2} us", total * 1e6);
     assert_eq!(common::accepted(&out, "hold").len(), 1, "the hold is found");
     assert_eq!(out.summary.final_model.hold, "zoh:10000");

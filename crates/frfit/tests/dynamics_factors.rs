@@ -42,7 +42,7 @@ fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
     let out = common::diagnose(&data, "common lag", ModeSelection::Auto);
     let steps = common::accepted(&out, "input_dynamics");
     assert_eq!(steps.len(), 1, "one input_dynamics step");
-    let p = &steps[0].params;
+    let p = steps[0].fitted.params_json();
     assert_eq!(p["support"], "all");
     assert_eq!(p["order"], 1);
     assert_eq!(p["inputs"].as_array().unwrap().len(), 13);
@@ -131,8 +131,10 @@ fn assert_lag_and_delay_found(f_c: f64) {
     let out = common::diagnose(&data, "common lag + delay", ModeSelection::Auto);
     let lag = common::accepted(&out, "input_dynamics");
     assert_eq!(lag.len(), 1, "one input_dynamics step (lag at {f_c} Hz)");
-    assert_eq!(lag[0].params["support"], "all");
-    let pole = lag[0].params["poles"][0]["f_hz"].as_f64().unwrap();
+    assert_eq!(lag[0].fitted.params_json()["support"], "all");
+    let pole = lag[0].fitted.params_json()["poles"][0]["f_hz"]
+        .as_f64()
+        .unwrap();
     assert!(
         (pole / f_c - 1.0).abs() < 0.03,
         "lag at {pole:.1} Hz, made at {f_c}"
@@ -181,7 +183,7 @@ fn an_actuator_lead_lag_is_an_input_factor_with_a_zero() {
     let out = common::diagnose(&data, "actuator lead-lag", ModeSelection::Auto);
     let steps = common::accepted(&out, "input_dynamics");
     assert_eq!(steps.len(), 1, "one input_dynamics step");
-    let p = &steps[0].params;
+    let p = steps[0].fitted.params_json();
     assert_eq!(p["support"], "inputs");
     assert_eq!(p["inputs"][0], 5, "the factor is on input 5");
     assert_eq!(p["order"], 1);
@@ -223,7 +225,7 @@ fn an_actuator_lag_lead_keeps_its_zero_above_the_band() {
         println!("evidence: {}", s.evidence);
     }
     let last = steps.last().expect("an input_dynamics step");
-    let p = &last.params;
+    let p = last.fitted.params_json();
     assert_eq!(p["inputs"][0], 5, "the factor is on input 5");
     let pole = p["poles"][0]["f_hz"].as_f64().unwrap();
     let zero = p["zeros"][0]["f_hz"].as_f64().unwrap();
@@ -268,7 +270,7 @@ fn an_actuator_lag_is_first_order_even_where_a_second_order_fits_as_well() {
     println!("  diagnosis took {:.1} s", t.elapsed().as_secs_f64());
     let steps = common::accepted(&out, "input_dynamics");
     assert_eq!(steps.len(), 1, "one input_dynamics step");
-    let p = &steps[0].params;
+    let p = steps[0].fitted.params_json();
     println!("evidence: {}", steps[0].evidence);
     assert_eq!(p["support"], "inputs");
     assert_eq!(p["inputs"][0], 4, "the factor is on input 4");

@@ -61,7 +61,7 @@ fn a_suspension_with_a_missed_mode() {
     assert_near_truth(&out, &clean);
     let stiff = common::accepted(&out, "stiffness");
     assert_eq!(stiff.len(), 1, "one stiffness step");
-    let f = stiff[0].params["f_hz"].as_f64().unwrap();
+    let f = stiff[0].fitted.params_json()["f_hz"].as_f64().unwrap();
     assert!(
         (f / f_s - 1.0).abs() < 0.02,
         "suspension at {f:.3} Hz, made {f_s}"
@@ -69,7 +69,7 @@ fn a_suspension_with_a_missed_mode() {
     let near = |f: f64| (f / f_m - 1.0).abs() <= 0.005;
     let in_loop = common::accepted(&out, "missed_mode")
         .iter()
-        .any(|s| near(s.params["f_hz"].as_f64().unwrap()));
+        .any(|s| near(s.fitted.params_json()["f_hz"].as_f64().unwrap()));
     let in_initial = out.summary.initial.modes.iter().any(|m| near(m.f_hz));
     println!("  missed mode: found by the loop {in_loop}, picked at once {in_initial}");
     assert!(in_loop || in_initial, "the mode at {f_m} Hz is found");
@@ -169,7 +169,7 @@ fn a_sensor_resonance_below_a_mode_and_two_close_missed_modes() {
     assert!(out.summary.initial.restart.is_none(), "no restart");
     let added: Vec<f64> = common::accepted(&out, "missed_mode")
         .iter()
-        .filter_map(|s| s.params["f_hz"].as_f64())
+        .filter_map(|s| s.fitted.params_json()["f_hz"].as_f64())
         .collect();
     for f in [1466.4, 1560.7] {
         assert!(
@@ -277,7 +277,7 @@ fn resonance_above_the_band(seed: u64, f_r: f64) {
     );
     let steps = common::accepted(&out, "output_dynamics");
     assert_eq!(steps.len(), 1, "one output_dynamics step");
-    let p = &steps[0].params;
+    let p = steps[0].fitted.params_json();
     assert_eq!(p["order"], 2);
     assert_eq!(p["outputs"][0], 2, "the resonance is on output 2");
     let f = p["poles"][0]["f_hz"].as_f64().unwrap();

@@ -37,7 +37,7 @@ fn three_realizations_are_noise_limited_when_declared() {
         s.steps
             .iter()
             .filter(|x| x.accepted)
-            .map(|x| &x.effect)
+            .map(|x| x.effect())
             .collect::<Vec<_>>()
     );
     assert!(s
@@ -90,11 +90,11 @@ fn ten_times_the_noise_adds_nothing() {
     };
     let out = run(&data, "simulated, 10x noise", &cfg, "diagnose").unwrap();
     let s = &out.summary;
-    let accepted: Vec<&String> = s
+    let accepted: Vec<&str> = s
         .steps
         .iter()
         .filter(|x| x.accepted)
-        .map(|x| &x.effect)
+        .map(|x| x.effect())
         .collect();
     println!(
         "10x noise: verdict {}, {} modes, residual/noise {:.3}, accepted {accepted:?}, restart {:?}",

@@ -82,7 +82,7 @@ fn loop_adds_nothing_on_data_without_undeclared_effects() {
             .steps
             .iter()
             .filter(|s| s.accepted)
-            .map(|s| format!("{} {}", s.effect, s.params))
+            .map(|s| format!("{} {}", s.effect(), s.fitted.params_json()))
             .collect();
         if added.is_empty() {
             clean += 1;
@@ -136,8 +136,8 @@ fn loop_finds_an_undeclared_delay_on_the_same_systems() {
             .summary
             .steps
             .iter()
-            .filter(|s| s.accepted && s.effect == "delay")
-            .filter_map(|s| s.params["seconds"].as_f64())
+            .filter(|s| s.accepted && s.effect() == "delay")
+            .filter_map(|s| s.fitted.params_json()["seconds"].as_f64())
             .collect();
         println!(
             "seed {seed}: initial residual/noise {:.1}, delay found {:?}, verdict {}",

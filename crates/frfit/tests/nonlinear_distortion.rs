@@ -35,7 +35,7 @@ fn diagnose(data: &Frf, name: &str, band: Option<(f64, f64)>) -> PipelineOutput 
         s.steps
             .iter()
             .filter(|x| x.accepted)
-            .map(|x| &x.effect)
+            .map(|x| x.effect())
             .collect::<Vec<_>>(),
         s.distortion,
         s.verdict_evidence
@@ -131,7 +131,7 @@ fn motor_bench_is_nonlinear_distortion() {
         .steps
         .iter()
         .filter(|x| x.accepted)
-        .map(|x| x.effect.as_str())
+        .map(|x| x.effect())
         .collect();
     let replaced: Vec<&str> = s
         .initial

@@ -111,7 +111,7 @@ fn the_piezo_like_case_fits_converged_stable_near_the_plant_and_diagnose_is_no_w
             d.steps
                 .iter()
                 .filter(|s| s.accepted)
-                .map(|s| s.effect.as_str())
+                .map(|s| s.effect())
                 .collect::<Vec<_>>()
         );
         let c = fm.convergence.to_ascii_lowercase();

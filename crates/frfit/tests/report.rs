@@ -9,6 +9,7 @@
 use faer::Mat;
 use frf_data::cmif::{cmif, pick_peaks, PeakConfig};
 use frf_data::{Frf, FrfDataset, C64};
+use frfit::effects::{FactorSupport, FittedEffect, PoleParams};
 use frfit::report::{write_report, ReportInput};
 use frfit::summary::{
     DataSummary, ErrorStats, FinalModelSummary, InitialSummary, ModeSummary, PeakSummary,
@@ -201,11 +202,13 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
 fn two_steps() -> Vec<StepSummary> {
     vec![
         StepSummary {
-            effect: "missed_mode".into(),
+            fitted: FittedEffect::MissedMode {
+                f_hz: 120.01,
+                zeta: 0.0199,
+            },
             accepted: true,
             evidence: "residual CMIF peak at 120.3 Hz, 14 dB above | the noise".into(),
-            params: serde_json::json!({"f_hz": 120.01, "zeta": 0.0199}),
-            uncertainty: Some(serde_json::json!({"f_hz": 0.02, "zeta": 0.0004})),
+            uncertainty: Some([("f_hz".to_string(), 0.02), ("zeta".to_string(), 0.0004)].into()),
             f_statistic: 812.0,
             f_critical: 3.0,
             added_params: 14,
@@ -216,10 +219,13 @@ fn two_steps() -> Vec<StepSummary> {
             held_out: None,
         },
         StepSummary {
-            effect: "delay".into(),
+            fitted: FittedEffect::Delay {
+                seconds: 3e-7,
+                total_delay_s: 3e-7,
+                refit: None,
+            },
             accepted: false,
             evidence: "phase trend of 0.3 us across the band".into(),
-            params: serde_json::json!({"seconds": 3e-7}),
             uncertainty: None,
             f_statistic: 0.4,
             f_critical: 3.9,
@@ -534,9 +540,21 @@ fn degenerate_inputs_do_not_panic() {
     model.values[1] = C64::new(f64::NAN, 0.0);
     let var = data.variances().unwrap().to_vec();
     let mut step = two_steps().remove(0);
-    step.effect = "odd/effect name".into();
     step.figure = Some("../escape.svg".into());
-    step.params = serde_json::json!({"f_hz": 1e9, "nested": {"poles": [-1.0, -2.5e-7]}});
+    // a factor far outside the band, with nested parameters
+    step.fitted = FittedEffect::InputDynamics {
+        inputs: vec![1],
+        support: FactorSupport::All,
+        order: 2,
+        poles: vec![PoleParams {
+            f_hz: 1e9,
+            zeta: Some(-2.5e-7),
+            re: Some(-1.0),
+            im: None,
+        }],
+        zeros: Vec::new(),
+        non_minimum_phase: None,
+    };
     let mut clash = two_steps().remove(1);
     clash.figure = Some("cmif.svg".into());
     let s = summary(&data, vec![step, clash], Some(1e-2));
@@ -559,12 +577,12 @@ fn degenerate_inputs_do_not_panic() {
     let files = write_report(&dir, &input, &s).unwrap();
     assert!(files
         .iter()
-        .any(|f| f.ends_with("step_1_odd_effect_name.svg")));
+        .any(|f| f.ends_with("step_1_input_dynamics.svg")));
     // A step figure named like another figure does not overwrite it.
     assert!(files.iter().any(|f| f.ends_with("step_2_delay.svg")));
     assert_eq!(files.iter().filter(|f| f.ends_with("cmif.svg")).count(), 1);
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
-    assert!(md.contains("poles = [-1, -2.5e-7]"), "{md}");
+    assert!(md.contains("zeta = -2.5e-7, re = -1}]"), "{md}");
     for f in &files {
         assert!(std::fs::metadata(f).unwrap().len() > 0);
     }
@@ -603,8 +621,10 @@ fn wafer_report() {
         })
         .collect();
     let mut step = two_steps().remove(0);
-    step.effect = "hold".into();
-    step.params = serde_json::json!({"fs_hz": 10000.0});
+    step.fitted = FittedEffect::Hold {
+        fs_hz: 10000.0,
+        remaining_delay_s: 0.0,
+    };
     step.uncertainty = None;
     step.figure = None;
     s.steps = vec![step];

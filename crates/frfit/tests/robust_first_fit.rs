@@ -45,7 +45,7 @@ fn failures(seeds: &[u64], periods: usize, realizations: usize, max_ratio: f64) 
             .steps
             .iter()
             .filter(|x| x.accepted)
-            .map(|x| x.effect.as_str())
+            .map(|x| x.effect())
             .collect();
         let line = format!(
             "plate {seed} (last mode {last:.1} Hz): first fit residual/noise {:.3} with {} \

@@ -104,14 +104,14 @@ fn assert_low_mode_found(f_l: f64, gain: f64, lo_hz: f64, seed: u64) {
         s.steps
             .iter()
             .filter(|x| x.accepted)
-            .map(|x| format!("{} {}", x.effect, x.params))
+            .map(|x| format!("{} {}", x.effect(), x.fitted.params_json()))
             .collect::<Vec<_>>(),
         s.verdict
     );
     assert!(
         !s.steps
             .iter()
-            .any(|x| x.accepted && x.effect == "stiffness"),
+            .any(|x| x.accepted && x.effect() == "stiffness"),
         "{what}"
     );
     assert_eq!(s.final_model.rigid_body_integrators, 2, "{what}");
@@ -167,7 +167,7 @@ fn assert_suspension_found(f_s: f64, lo_hz: f64, seed: u64) {
         .steps
         .iter()
         .filter(|x| x.accepted)
-        .map(|x| format!("{} {}", x.effect, x.params))
+        .map(|x| format!("{} {}", x.effect(), x.fitted.params_json()))
         .collect();
     let what = format!(
         "suspension at {f_s} Hz, lines from {lo_hz} Hz: steps {accepted:?}, verdict {}",
@@ -177,10 +177,10 @@ fn assert_suspension_found(f_s: f64, lo_hz: f64, seed: u64) {
     let stiff: Vec<_> = s
         .steps
         .iter()
-        .filter(|x| x.accepted && x.effect == "stiffness")
+        .filter(|x| x.accepted && x.effect() == "stiffness")
         .collect();
     assert_eq!(stiff.len(), 1, "{what}");
-    let f = stiff[0].params["f_hz"].as_f64().unwrap();
+    let f = stiff[0].fitted.params_json()["f_hz"].as_f64().unwrap();
     assert!((f / f_s - 1.0).abs() < 0.05, "{what}");
     assert_eq!(s.final_model.rigid_body_integrators, 0, "{what}");
     assert_eq!(s.final_model.modes.len(), 3, "{what}");

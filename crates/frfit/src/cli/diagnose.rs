@@ -116,13 +116,13 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         for s in &out.summary.steps {
             println!(
                 "  step {:<16} {:<8} F = {:>10.3e} (crit {:.3}) median rel {:.3e} -> {:.3e}  {}",
-                s.effect,
+                s.effect(),
                 if s.accepted { "ACCEPTED" } else { "rejected" },
                 s.f_statistic,
                 s.f_critical,
                 s.before.median_rel,
                 s.after.median_rel,
-                s.params
+                s.fitted.params_json()
             );
         }
         println!(

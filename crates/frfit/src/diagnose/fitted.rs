@@ -3,137 +3,11 @@
 
 use super::candidate::{Candidate, FactorStart};
 use super::refit::new_modes;
+use crate::effects::{FactorSupport, FittedEffect, PoleParams, Refit};
 use additive_riv::{AdditiveModel, SubmodelKind};
-use serde::Serialize;
 use std::f64::consts::TAU;
-use validation::analysis::Effect;
-
-/// The refit-from-the-start marker of a delay step (`"refit": "from the start"`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub enum Refit {
-    /// The model was refitted from the CMIF with the delay estimated from the data.
-    #[serde(rename = "from the start")]
-    FromTheStart,
-}
-
-/// A pole (or zero) of a dynamics factor: `f_hz = |p| / 2 pi`, and, once fitted, its
-/// relative damping `-Re p / |p|` and the root itself (rad/s).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct PoleParams {
-    /// `|p| / 2 pi`, Hz.
-    pub f_hz: f64,
-    /// Relative damping `-Re p / |p|` (1 for a real pole in the left half-plane).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub zeta: Option<f64>,
-    /// Real part, rad/s.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub re: Option<f64>,
-    /// Imaginary part, rad/s.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub im: Option<f64>,
-}
-
-/// The parameters of a tested effect as its refit estimated them: one variant per
-/// effect of the catalogue. Serialised without a tag (the step's `effect` names it).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(untagged)]
-pub enum FittedEffect {
-    /// `missed_mode`: the added mode.
-    MissedMode {
-        /// Natural frequency, Hz.
-        f_hz: f64,
-        /// Relative damping.
-        zeta: f64,
-    },
-    /// `delay`: the delay added and the model's total.
-    Delay {
-        /// Delay added to the model's, seconds.
-        seconds: f64,
-        /// The model's delay after the step, seconds.
-        total_delay_s: f64,
-        /// Set when the model was refitted from the start with the delay.
-        #[serde(skip_serializing_if = "Option::is_none")]
-        refit: Option<Refit>,
-    },
-    /// `hold`: the exact zero-order hold.
-    Hold {
-        /// Sample rate, Hz.
-        fs_hz: f64,
-        /// The delay the model keeps beside the hold, seconds.
-        remaining_delay_s: f64,
-    },
-    /// `feedthrough`: a constant matrix.
-    Feedthrough {
-        /// RMS of its entries.
-        rms: f64,
-        /// Whether it bypasses the delay and hold (crosstalk).
-        bypasses_delay: bool,
-    },
-    /// `stiffness`: the suspension of the rigid body.
-    Stiffness {
-        /// Suspension frequency, Hz.
-        f_hz: f64,
-        /// Its relative damping.
-        zeta: f64,
-    },
-    /// `input_dynamics`: a factor on one input column, or common to every entry.
-    InputDynamics {
-        /// The inputs, 1-based (every input for the common factor).
-        inputs: Vec<usize>,
-        /// `"all"` for a factor common to every entry, `"inputs"` otherwise.
-        support: &'static str,
-        /// Order of the factor's denominator (1 or 2).
-        order: usize,
-        /// Its poles.
-        poles: Vec<PoleParams>,
-        /// Its zeros (none for an all-pole factor).
-        #[serde(skip_serializing_if = "Vec::is_empty")]
-        zeros: Vec<PoleParams>,
-        /// With zeros: whether one lies in the closed right half-plane (physically
-        /// possible, e.g. a non-collocated mount, but worth a look).
-        #[serde(skip_serializing_if = "Option::is_none")]
-        non_minimum_phase: Option<bool>,
-    },
-    /// `output_dynamics`: a factor on one output row, or common to every entry.
-    OutputDynamics {
-        /// The outputs, 1-based (every output for the common factor).
-        outputs: Vec<usize>,
-        /// `"all"` for a factor common to every entry, `"outputs"` otherwise.
-        support: &'static str,
-        /// Order of the factor's denominator (1 or 2).
-        order: usize,
-        /// Its poles.
-        poles: Vec<PoleParams>,
-        /// Its zeros (none for an all-pole factor).
-        #[serde(skip_serializing_if = "Vec::is_empty")]
-        zeros: Vec<PoleParams>,
-        /// With zeros: whether one lies in the closed right half-plane (physically
-        /// possible, e.g. a non-collocated mount, but worth a look).
-        #[serde(skip_serializing_if = "Option::is_none")]
-        non_minimum_phase: Option<bool>,
-    },
-}
 
 impl FittedEffect {
-    /// The catalogue effect.
-    pub fn effect(&self) -> Effect {
-        match self {
-            FittedEffect::MissedMode { .. } => Effect::MissedMode,
-            FittedEffect::Delay { .. } => Effect::Delay,
-            FittedEffect::Hold { .. } => Effect::Hold,
-            FittedEffect::Feedthrough { .. } => Effect::Feedthrough,
-            FittedEffect::Stiffness { .. } => Effect::Stiffness,
-            FittedEffect::InputDynamics { .. } => Effect::InputDynamics,
-            FittedEffect::OutputDynamics { .. } => Effect::OutputDynamics,
-        }
-    }
-
-    /// The `params` object of `summary.json`.
-    pub fn to_json(&self) -> serde_json::Value {
-        // plain numbers, booleans, strings and lists: serialising cannot fail
-        serde_json::to_value(self).unwrap_or(serde_json::Value::Null)
-    }
-
     /// The delay of `after` as a step beyond `before`.
     pub fn delay(before: &AdditiveModel, after: &AdditiveModel, refit: Option<Refit>) -> Self {
         FittedEffect::Delay {
@@ -198,9 +72,9 @@ impl FittedEffect {
                 FittedEffect::InputDynamics {
                     inputs: inputs.clone(),
                     support: if candidate.is_common_factor() {
-                        "all"
+                        FactorSupport::All
                     } else {
-                        "inputs"
+                        FactorSupport::Inputs
                     },
                     order: start.order,
                     poles,
@@ -213,9 +87,9 @@ impl FittedEffect {
                 FittedEffect::OutputDynamics {
                     outputs: outputs.clone(),
                     support: if candidate.is_common_factor() {
-                        "all"
+                        FactorSupport::All
                     } else {
-                        "outputs"
+                        FactorSupport::Outputs
                     },
                     order: start.order,
                     poles,

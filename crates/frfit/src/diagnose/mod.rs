@@ -28,8 +28,8 @@ mod refit;
 mod restart;
 mod trial;
 
+pub use crate::effects::{FittedEffect, PoleParams, Refit};
 pub use candidate::{Candidate, DelayStart, FactorStart, Proposal};
-pub use fitted::{FittedEffect, PoleParams, Refit};
 pub use restart::{
     better_first_fit, delay_restart, worth_a_delay_restart, DelayRestart, Restarted,
 };
@@ -657,10 +657,9 @@ fn step_summaries(
     after: ErrorStats,
 ) -> Vec<StepSummary> {
     let step = |params: &FittedEffect, evidence: String| StepSummary {
-        effect: effect_name(params.effect()).to_string(),
+        fitted: params.clone(),
         accepted,
         evidence,
-        params: params.to_json(),
         uncertainty: None,
         f_statistic: tr.f,
         f_critical: tr.f_crit,

@@ -3,12 +3,12 @@
 //! start.
 
 use super::candidate::{Candidate, Proposal};
-use super::fitted::{FittedEffect, Refit};
 use super::held_out::HeldOut;
 use super::refit::{
     f_test, lacked_light_modes, model_cost, new_modes, refit, unstable_parts, Refitted,
 };
 use super::restart::{delay_restart, DelayRestart};
+use crate::effects::{FittedEffect, Refit};
 use crate::pipeline::{FitContext, PipelineConfig};
 use additive_riv::residual_stats::{local_energy, ResidualStats};
 use additive_riv::riv::{iterate, RivConfig};

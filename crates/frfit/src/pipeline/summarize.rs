@@ -3,6 +3,7 @@
 
 use super::config::{PipelineConfig, NOT_ANALYSED};
 use super::context::FitContext;
+use crate::effects::{ModeParams, Repair};
 use crate::summary::*;
 use additive_riv::{AdditiveModel, FactorTarget, FitterReport, SubmodelKind};
 use frf_data::{Fit, Frf, FrfDataset};
@@ -515,22 +516,20 @@ fn repair_summaries(r: Option<&additive_riv::split::RepairReport>) -> Vec<Repair
         .out_of_band
         .iter()
         .map(|m| RepairSummary {
-            effect: "out_of_band_mode".into(),
-            params: serde_json::json!({
-                "f_hz": m.f_hz,
-                "zeta": m.zeta,
-                "edge": m.edge,
-                "feedthrough_cost_ratio": m.feedthrough_cost_ratio,
-            }),
+            repair: Repair::OutOfBandMode {
+                f_hz: m.f_hz,
+                zeta: m.zeta,
+                edge: m.edge.clone(),
+                feedthrough_cost_ratio: m.feedthrough_cost_ratio,
+            },
             f_statistic: m.f_stat,
         })
         .collect();
     out.extend(r.splits.iter().map(|s| RepairSummary {
-        effect: "close_pair".into(),
-        params: serde_json::json!({
-            "from_hz": s.from_hz,
-            "modes": s.into.iter().map(|(f, z)| serde_json::json!({"f_hz": f, "zeta": z})).collect::<Vec<_>>(),
-        }),
+        repair: Repair::ClosePair {
+            from_hz: s.from_hz,
+            modes: s.into.map(|(f_hz, zeta)| ModeParams { f_hz, zeta }),
+        },
         f_statistic: s.f_stat,
     }));
     out

@@ -173,7 +173,7 @@ pub fn from_fit_if_worse(
         .steps
         .iter()
         .filter(|s| s.accepted)
-        .map(|s| s.effect.clone())
+        .map(|s| s.effect().to_string())
         .collect();
     let summary = FromFitSummary {
         reason: format!(

@@ -287,13 +287,13 @@ pub fn print_steps(name: &str, out: &frfit::run::PipelineOutput) {
     for st in &s.steps {
         println!(
             "  {} accepted={}{} F={:.3} (crit {:.3}) {} median {:.3e} -> {:.3e}",
-            st.effect,
+            st.effect(),
             st.accepted,
             st.superseded_by
                 .map_or(String::new(), |n| format!(" (removed at step {n})")),
             st.f_statistic,
             st.f_critical,
-            st.params,
+            st.fitted.params_json(),
             st.before.median_rel,
             st.after.median_rel
         );
@@ -315,7 +315,7 @@ pub fn print_steps(name: &str, out: &frfit::run::PipelineOutput) {
 pub fn assert_output_resonance(out: &frfit::run::PipelineOutput, row: usize, f_r: f64, zeta: f64) {
     let steps = accepted(out, "output_dynamics");
     assert_eq!(steps.len(), 1, "one output_dynamics step");
-    let p = &steps[0].params;
+    let p = steps[0].fitted.params_json();
     assert_eq!(p["support"], "outputs");
     assert_eq!(p["order"], 2);
     assert_eq!(p["outputs"][0], row, "the resonance is on output {row}");
@@ -340,7 +340,7 @@ pub fn accepted<'a>(
     out.summary
         .steps
         .iter()
-        .filter(|s| s.accepted && s.superseded_by.is_none() && s.effect == effect)
+        .filter(|s| s.accepted && s.superseded_by.is_none() && s.effect() == effect)
         .collect()
 }
 
