@@ -582,7 +582,10 @@ fn degenerate_inputs_do_not_panic() {
     assert!(files.iter().any(|f| f.ends_with("step_2_delay.svg")));
     assert_eq!(files.iter().filter(|f| f.ends_with("cmif.svg")).count(), 1);
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
-    assert!(md.contains("poles = [{f_hz = 1e9, re = -1, zeta = -2.5e-7}]"), "{md}");
+    assert!(
+        md.contains("poles = [{f_hz = 1e9, re = -1, zeta = -2.5e-7}]"),
+        "{md}"
+    );
     for f in &files {
         assert!(std::fs::metadata(f).unwrap().len() > 0);
     }

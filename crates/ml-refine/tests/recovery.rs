@@ -106,20 +106,7 @@ fn missed_modes_clear_of_the_others_are_added_together() {
         );
         assert!(fit.convergence.is_converged(), "{:?}", fit.convergence);
         assert_eq!(fit.model.modal.pairs.len(), 6, "{msgs}");
-        for p in &truth.modal.pairs {
-            let nearest = fit
-                .model
-                .modal
-                .pairs
-                .iter()
-                .map(|q| (q.f_hz() - p.f_hz()).abs() / p.f_hz())
-                .fold(f64::INFINITY, f64::min);
-            assert!(
-                nearest < 1e-3,
-                "seed {seed}: {:.2} Hz missed\n{msgs}",
-                p.f_hz()
-            );
-        }
+        assert_every_mode_found(&fit.model, &truth, seed, &msgs);
         let rounds = msgs.matches(" added at ").count() - msgs.matches("not kept").count();
         assert_eq!(
             rounds, 1,
@@ -210,20 +197,7 @@ fn modes_added_under_a_held_delay_are_dropped_once_the_delay_is_free() {
             fit.convergence
         );
         assert_eq!(fit.model.modal.pairs.len(), 5, "seed {seed}\n{msgs}");
-        for p in &truth.modal.pairs {
-            let nearest = fit
-                .model
-                .modal
-                .pairs
-                .iter()
-                .map(|q| (q.f_hz() - p.f_hz()).abs() / p.f_hz())
-                .fold(f64::INFINITY, f64::min);
-            assert!(
-                nearest < 1e-3,
-                "seed {seed}: {:.2} Hz missed\n{msgs}",
-                p.f_hz()
-            );
-        }
+        assert_every_mode_found(&fit.model, &truth, seed, &msgs);
         assert!(
             (fit.model.factors.delay_s - 1e-4).abs() < 1e-8,
             "seed {seed}: delay {:.4} us",
@@ -247,4 +221,26 @@ fn modes_added_under_a_held_delay_are_dropped_once_the_delay_is_free() {
         with_additions >= 4,
         "{with_additions} of 6 seeds added modes"
     );
+}
+
+/// Every mode of `truth` has a mode of `model` within 1e-3 of its frequency.
+fn assert_every_mode_found(
+    model: &realize::FrfModel,
+    truth: &realize::FrfModel,
+    seed: u64,
+    msgs: &str,
+) {
+    for p in &truth.modal.pairs {
+        let nearest = model
+            .modal
+            .pairs
+            .iter()
+            .map(|q| (q.f_hz() - p.f_hz()).abs() / p.f_hz())
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            nearest < 1e-3,
+            "seed {seed}: {:.2} Hz missed\n{msgs}",
+            p.f_hz()
+        );
+    }
 }
