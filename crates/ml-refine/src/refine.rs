@@ -1205,7 +1205,10 @@ impl MlRefine {
         // them one pole, none of them in the plant), and a start mode it displaced can
         // end as a spike beside the resonance the addition took over
         let mut first_added = lay.n_pairs - added.len();
-        let mut tested: Vec<usize> = Vec::new();
+        // pairs tested and kept, and whether the refinement without them failed (those are
+        // tested again after a later drop: another spurious mode that ran off in that
+        // refinement may be the one that went)
+        let mut tested: Vec<(usize, bool)> = Vec::new();
         loop {
             if !measured {
                 break;
@@ -1214,7 +1217,7 @@ impl MlRefine {
                 &prob,
                 &out,
                 (&lay, n_params, first_added),
-                &tested,
+                &tested.iter().map(|t| t.0).collect::<Vec<_>>(),
                 &model,
                 (n * m) as f64,
                 cfg,
@@ -1224,7 +1227,7 @@ impl MlRefine {
             };
             messages.push(step.message);
             let Some((prob_d, lay_d, n_params_d, out_d)) = step.dropped else {
-                tested.push(step.pair);
+                tested.push((step.pair, step.failed));
                 continue;
             };
             let q = step.pair;
@@ -1235,7 +1238,8 @@ impl MlRefine {
             }
             tested = tested
                 .into_iter()
-                .map(|k| if k > q { k - 1 } else { k })
+                .filter(|t| !t.1)
+                .map(|(k, f)| (if k > q { k - 1 } else { k }, f))
                 .collect();
             out = continued(out, out_d, &mut work);
             prob = prob_d;
@@ -1689,6 +1693,8 @@ fn drop_integrators(
 struct ModeRetest {
     message: String,
     pair: usize,
+    /// The refinement without the mode did not converge.
+    failed: bool,
     dropped: Option<(Problem, Layout, usize, crate::lm::LmOutcome)>,
 }
 
@@ -1789,6 +1795,7 @@ fn retest_mode(
                 }
             ),
             pair: q,
+            failed: !out_d.convergence.is_converged(),
             dropped: None,
         });
     }
@@ -1801,6 +1808,7 @@ fn retest_mode(
             cfg.min_f
         ),
         pair: q,
+        failed: false,
         dropped: Some((prob_d, lay_d, n_params_d, out_d)),
     })
 }
