@@ -224,20 +224,35 @@ pub fn cost_of(model: &AdditiveModel, data: &FitData) -> f64 {
     model_cost(model, data, None)
 }
 
+/// The pairs of modes of `model` (submodel indices `a < b`, in index order) whose upper
+/// poles are closer than `fraction` of their mean `|Re p|`, with that distance over
+/// the mean `|Re p|`: [`DUPLICATE_FRACTION`] finds the poles two submodels cannot both
+/// hold (the drop pass), a fraction of 1 the modes within each other's half-power
+/// half-bandwidth (the diagnosis's twin merge).
+pub fn close_mode_pairs(model: &AdditiveModel, fraction: f64) -> Vec<(usize, usize, f64)> {
+    let poles: Vec<(usize, C64)> = model
+        .submodels
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.kind == SubmodelKind::Mode)
+        .filter_map(|(i, s)| model.upper_pole(s).map(|p| (i, p)))
+        .collect();
+    let mut pairs = Vec::new();
+    for (k, &(a, pa)) in poles.iter().enumerate() {
+        for &(b, pb) in &poles[k + 1..] {
+            let (d, bw) = ((pa - pb).norm(), 0.5 * (pa.re.abs() + pb.re.abs()));
+            if d < fraction * bw {
+                pairs.push((a, b, d / bw));
+            }
+        }
+    }
+    pairs
+}
+
 /// True when two modes of `model` sit on practically one pole (closer than
 /// [`DUPLICATE_FRACTION`] of their mean `|Re p|`): not identifiable.
 pub(crate) fn has_duplicate(model: &AdditiveModel) -> bool {
-    let poles: Vec<C64> = model
-        .submodels
-        .iter()
-        .filter(|s| s.kind == SubmodelKind::Mode)
-        .filter_map(|s| model.upper_pole(s))
-        .collect();
-    poles.iter().enumerate().any(|(i, a)| {
-        poles[i + 1..]
-            .iter()
-            .any(|b| (a - b).norm() < DUPLICATE_FRACTION * 0.5 * (a.re.abs() + b.re.abs()))
-    })
+    !close_mode_pairs(model, DUPLICATE_FRACTION).is_empty()
 }
 
 /// Natural frequency (Hz) and damping of submodel `i`, when it is a resonance.

@@ -13,13 +13,13 @@
 use crate::pair_start::with_local_pairs;
 use crate::problem::FitData;
 use crate::residual_stats::{
-    cost_of, line_spacing_near, local_energy, mode_f_hz, significant_off_peak, ResidualStats,
-    DUPLICATE_FRACTION, EXACT_FIT_REL,
+    close_mode_pairs, cost_of, line_spacing_near, local_energy, mode_f_hz, significant_off_peak,
+    ResidualStats, DUPLICATE_FRACTION, EXACT_FIT_REL,
 };
 use crate::riv::{iterate_warm, RivConfig};
 use crate::significance::{f_critical_eff, f_statistic, submodel_cost_increase};
 use crate::{fit_numerators, AdditiveModel, RivError, SubmodelKind};
-use frf_data::{Fit, C64};
+use frf_data::Fit;
 use std::f64::consts::TAU;
 
 /// Settings of [`adapt_modes`].
@@ -160,31 +160,6 @@ type DropOutcome = (
     Vec<(f64, f64)>,
     Option<ResidualStats>,
 );
-
-/// The pairs of modes of `model` (submodel indices `a < b`, in index order) whose upper
-/// poles are closer than `fraction` of their mean `|Re p|`, with that distance over
-/// the mean `|Re p|`: [`DUPLICATE_FRACTION`] finds the poles two submodels cannot both
-/// hold (the drop pass), a fraction of 1 the modes within each other's half-power
-/// half-bandwidth (the diagnosis's twin merge).
-pub fn close_mode_pairs(model: &AdditiveModel, fraction: f64) -> Vec<(usize, usize, f64)> {
-    let poles: Vec<(usize, C64)> = model
-        .submodels
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.kind == SubmodelKind::Mode)
-        .filter_map(|(i, s)| model.upper_pole(s).map(|p| (i, p)))
-        .collect();
-    let mut pairs = Vec::new();
-    for (k, &(a, pa)) in poles.iter().enumerate() {
-        for &(b, pb) in &poles[k + 1..] {
-            let (d, bw) = ((pa - pb).norm(), 0.5 * (pa.re.abs() + pb.re.abs()));
-            if d < fraction * bw {
-                pairs.push((a, b, d / bw));
-            }
-        }
-    }
-    pairs
-}
 
 /// Removes unstable, overdamped, out-of-band, unresolved (a half-power bandwidth below
 /// the line spacing and not significant off its own lines, [`significant_off_peak`]) and

@@ -107,40 +107,46 @@ pub enum FittedEffect {
     InputDynamics {
         /// The inputs, 1-based (every input for the common factor).
         inputs: Vec<usize>,
-        /// [`FactorSupport::All`] for a factor common to every entry,
-        /// [`FactorSupport::Inputs`] otherwise.
-        support: FactorSupport,
-        /// Order of the factor's denominator (1 or 2).
-        order: usize,
-        /// Its poles.
-        poles: Vec<PoleParams>,
-        /// Its zeros (none for an all-pole factor).
-        #[serde(default, skip_serializing_if = "Vec::is_empty")]
-        zeros: Vec<PoleParams>,
-        /// With zeros: whether one lies in the closed right half-plane (physically
-        /// possible, e.g. a non-collocated mount, but worth a look).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        non_minimum_phase: Option<bool>,
+        /// The factor ([`FactorSupport::All`] or [`FactorSupport::Inputs`]).
+        #[serde(flatten)]
+        factor: FactorParams,
     },
     /// `output_dynamics`: a factor on one output row, or common to every entry.
     OutputDynamics {
         /// The outputs, 1-based (every output for the common factor).
         outputs: Vec<usize>,
-        /// [`FactorSupport::All`] for a factor common to every entry,
-        /// [`FactorSupport::Outputs`] otherwise.
-        support: FactorSupport,
-        /// Order of the factor's denominator (1 or 2).
-        order: usize,
-        /// Its poles.
-        poles: Vec<PoleParams>,
-        /// Its zeros (none for an all-pole factor).
-        #[serde(default, skip_serializing_if = "Vec::is_empty")]
-        zeros: Vec<PoleParams>,
-        /// With zeros: whether one lies in the closed right half-plane (physically
-        /// possible, e.g. a non-collocated mount, but worth a look).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
-        non_minimum_phase: Option<bool>,
+        /// The factor ([`FactorSupport::All`] or [`FactorSupport::Outputs`]).
+        #[serde(flatten)]
+        factor: FactorParams,
     },
+}
+
+/// A dynamics factor as fitted: where it acts, its order, poles and zeros (the
+/// `params` of an `input_dynamics` or `output_dynamics` step beside its inputs or
+/// outputs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FactorParams {
+    /// [`FactorSupport::All`] for a factor common to every entry, else the side it is on.
+    pub support: FactorSupport,
+    /// Order of the factor's denominator (1 or 2).
+    pub order: usize,
+    /// Its poles.
+    pub poles: Vec<PoleParams>,
+    /// Its zeros (none for an all-pole factor).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub zeros: Vec<PoleParams>,
+    /// With zeros: whether one lies in the closed right half-plane (physically
+    /// possible, e.g. a non-collocated mount, but worth a look).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub non_minimum_phase: Option<bool>,
+}
+
+/// The `params` object of an adjacently tagged catalogue entry, for display.
+fn params_of(entry: &impl Serialize) -> serde_json::Value {
+    // plain numbers, booleans, strings and lists: serialising cannot fail
+    serde_json::to_value(entry)
+        .map(|mut v| v["params"].take())
+        .unwrap_or(serde_json::Value::Null)
 }
 
 impl FittedEffect {
@@ -164,10 +170,7 @@ impl FittedEffect {
 
     /// The `params` object of `summary.json`, for display.
     pub fn params_json(&self) -> serde_json::Value {
-        // plain numbers, booleans, strings and lists: serialising cannot fail
-        serde_json::to_value(self)
-            .map(|mut v| v["params"].take())
-            .unwrap_or(serde_json::Value::Null)
+        params_of(self)
     }
 }
 
@@ -218,8 +221,6 @@ impl Repair {
 
     /// The `params` object of `summary.json`, for display.
     pub fn params_json(&self) -> serde_json::Value {
-        serde_json::to_value(self)
-            .map(|mut v| v["params"].take())
-            .unwrap_or(serde_json::Value::Null)
+        params_of(self)
     }
 }

@@ -404,7 +404,7 @@ impl UncertaintySummary {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::effects::{FactorSupport, ModeParams, PoleParams, Refit};
+    use crate::effects::{FactorParams, FactorSupport, ModeParams, PoleParams, Refit};
 
     fn step(fitted: FittedEffect) -> StepSummary {
         let e = ErrorStats {
@@ -457,16 +457,18 @@ mod tests {
             },
             FittedEffect::OutputDynamics {
                 outputs: vec![2],
-                support: FactorSupport::Outputs,
-                order: 2,
-                poles: vec![PoleParams {
-                    f_hz: 1700.0,
-                    zeta: Some(0.05),
-                    re: None,
-                    im: None,
-                }],
-                zeros: Vec::new(),
-                non_minimum_phase: None,
+                factor: FactorParams {
+                    support: FactorSupport::Outputs,
+                    order: 2,
+                    poles: vec![PoleParams {
+                        f_hz: 1700.0,
+                        zeta: Some(0.05),
+                        re: None,
+                        im: None,
+                    }],
+                    zeros: Vec::new(),
+                    non_minimum_phase: None,
+                },
             },
         ];
         for e in effects {
@@ -475,6 +477,13 @@ mod tests {
             assert_eq!(v["effect"], e.name());
             assert!(v["params"].is_object(), "{v}");
             assert_eq!(v["params"], e.params_json());
+            if let FittedEffect::OutputDynamics { .. } = e {
+                // the factor's parameters sit beside `outputs`, as the schema has them
+                assert_eq!(v["params"]["support"], "outputs", "{v}");
+                assert_eq!(v["params"]["order"], 2, "{v}");
+                assert_eq!(v["params"]["poles"][0]["f_hz"], 1700.0, "{v}");
+                assert_eq!(v["params"]["outputs"][0], 2, "{v}");
+            }
             let back: StepSummary = serde_json::from_value(v).unwrap();
             assert_eq!(back, s);
         }

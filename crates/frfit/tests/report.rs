@@ -9,7 +9,7 @@
 use faer::Mat;
 use frf_data::cmif::{cmif, pick_peaks, PeakConfig};
 use frf_data::{Frf, FrfDataset, C64};
-use frfit::effects::{FactorSupport, FittedEffect, PoleParams};
+use frfit::effects::{FactorParams, FactorSupport, FittedEffect, PoleParams};
 use frfit::report::{write_report, ReportInput};
 use frfit::summary::{
     DataSummary, ErrorStats, FinalModelSummary, InitialSummary, ModeSummary, PeakSummary,
@@ -544,16 +544,18 @@ fn degenerate_inputs_do_not_panic() {
     // a factor far outside the band, with nested parameters
     step.fitted = FittedEffect::InputDynamics {
         inputs: vec![1],
-        support: FactorSupport::All,
-        order: 2,
-        poles: vec![PoleParams {
-            f_hz: 1e9,
-            zeta: Some(-2.5e-7),
-            re: Some(-1.0),
-            im: None,
-        }],
-        zeros: Vec::new(),
-        non_minimum_phase: None,
+        factor: FactorParams {
+            support: FactorSupport::All,
+            order: 2,
+            poles: vec![PoleParams {
+                f_hz: 1e9,
+                zeta: Some(-2.5e-7),
+                re: Some(-1.0),
+                im: None,
+            }],
+            zeros: Vec::new(),
+            non_minimum_phase: None,
+        },
     };
     let mut clash = two_steps().remove(1);
     clash.figure = Some("cmif.svg".into());

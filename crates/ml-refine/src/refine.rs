@@ -1217,7 +1217,7 @@ impl MlRefine {
                 &prob,
                 &out,
                 (&lay, n_params, first_added),
-                &tested.iter().map(|t| t.0).collect::<Vec<_>>(),
+                &tested,
                 &model,
                 (n * m) as f64,
                 cfg,
@@ -1703,7 +1703,7 @@ struct ModeRetest {
 /// shares its resonance with another mode (poles within [`TWIN_FRACTION`] of their mean
 /// `|Re p|`: a twin) or is narrower than the line spacing around it (half-power
 /// bandwidth `2 zeta f`: a spike, which can fit the noise of one or two lines), not among
-/// the pairs already `tested` and kept. Twins come first, then the others by the cost
+/// the pairs already `tested` and kept (pair index, and whether that refinement failed). Twins come first, then the others by the cost
 /// they explain with the other poles held (the linear parameters refitted). A twin, or
 /// another candidate below [`MlConfig::min_f`] with the poles held, is tested by the
 /// refinement without it: it is dropped when that refinement converges to a cost the
@@ -1715,7 +1715,7 @@ fn retest_mode(
     prob: &Problem,
     out: &crate::lm::LmOutcome,
     (lay, n_params, first_added): (&Layout, usize, usize),
-    tested: &[usize],
+    tested: &[(usize, bool)],
     model: &FrfModel,
     observations: f64,
     cfg: &MlConfig,
@@ -1761,7 +1761,7 @@ fn retest_mode(
     };
     // twins first, then by the cost explained with the other poles held
     let (q, theta_d, ev_d, f_held, suspect) = (0..lay.n_pairs)
-        .filter(|q| !tested.contains(q))
+        .filter(|&q| !tested.iter().any(|&(k, _)| k == q))
         .filter_map(|q| {
             let suspect = twin(q);
             if q < first_added && !suspect && !narrow(q) {
@@ -1776,12 +1776,14 @@ fn retest_mode(
     if f_held >= cfg.min_f && !suspect {
         return None;
     }
-    let what = match (q >= first_added, twin(q), narrow(q)) {
-        (true, _, _) => "the added mode",
-        (false, true, _) => "the mode that shares its resonance with another",
-        _ => "the mode narrower than the line spacing",
+    let what = if q >= first_added {
+        "the added mode"
+    } else if suspect {
+        "the mode that shares its resonance with another"
+    } else {
+        "the mode narrower than the line spacing"
     };
-    let f_hz = C64::new(out.theta[2 * q], out.theta[2 * q + 1]).norm() / TAU;
+    let f_hz = pole(q).norm() / TAU;
     let out_d = refine(&prob_d, theta_d, ev_d, n_params_d, &lay_d);
     let f_refined = f_of(out_d.eval.cost);
     if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {

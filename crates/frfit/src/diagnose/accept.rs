@@ -5,10 +5,10 @@ use super::refit::{f_test, model_cost, refit, unstable_parts, Refitted};
 use super::trial::Trial;
 use crate::pipeline::{err, FitContext, PipelineConfig};
 use crate::FrfitError;
-use additive_riv::residual_stats::mode_f_hz;
+use additive_riv::residual_stats::{close_mode_pairs, mode_f_hz};
 use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::significance::{f_statistic, noise_scale, submodel_cost_increase};
-use additive_riv::structure::{close_mode_pairs, prune_modes, AdaptConfig};
+use additive_riv::structure::{prune_modes, AdaptConfig};
 use additive_riv::AdditiveModel;
 use frf_data::{Convergence, Fit, ModelStructure};
 

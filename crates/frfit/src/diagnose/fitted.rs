@@ -3,7 +3,7 @@
 
 use super::candidate::{Candidate, FactorStart};
 use super::refit::new_modes;
-use crate::effects::{FactorSupport, FittedEffect, PoleParams, Refit};
+use crate::effects::{FactorParams, FactorSupport, FittedEffect, PoleParams, Refit};
 use additive_riv::{AdditiveModel, SubmodelKind};
 use std::f64::consts::TAU;
 
@@ -67,37 +67,37 @@ impl FittedEffect {
                 };
                 FittedEffect::Stiffness { f_hz, zeta }
             }
-            Candidate::InputDynamics { inputs, start } => {
-                let (poles, zeros, non_minimum_phase) = fitted_roots(m, start);
-                FittedEffect::InputDynamics {
-                    inputs: inputs.clone(),
-                    support: if candidate.is_common_factor() {
-                        FactorSupport::All
-                    } else {
-                        FactorSupport::Inputs
-                    },
-                    order: start.order,
-                    poles,
-                    zeros,
-                    non_minimum_phase,
-                }
-            }
-            Candidate::OutputDynamics { outputs, start } => {
-                let (poles, zeros, non_minimum_phase) = fitted_roots(m, start);
-                FittedEffect::OutputDynamics {
-                    outputs: outputs.clone(),
-                    support: if candidate.is_common_factor() {
-                        FactorSupport::All
-                    } else {
-                        FactorSupport::Outputs
-                    },
-                    order: start.order,
-                    poles,
-                    zeros,
-                    non_minimum_phase,
-                }
-            }
+            Candidate::InputDynamics { inputs, start } => FittedEffect::InputDynamics {
+                inputs: inputs.clone(),
+                factor: factor_params(candidate, start, FactorSupport::Inputs, m),
+            },
+            Candidate::OutputDynamics { outputs, start } => FittedEffect::OutputDynamics {
+                outputs: outputs.clone(),
+                factor: factor_params(candidate, start, FactorSupport::Outputs, m),
+            },
         }
+    }
+}
+
+/// The dynamics factor of `candidate` (started from `start`) as fitted in `m`: on every
+/// entry for a common factor, else on `side`.
+fn factor_params(
+    candidate: &Candidate,
+    start: &FactorStart,
+    side: FactorSupport,
+    m: &AdditiveModel,
+) -> FactorParams {
+    let (poles, zeros, non_minimum_phase) = fitted_roots(m, start);
+    FactorParams {
+        support: if candidate.is_common_factor() {
+            FactorSupport::All
+        } else {
+            side
+        },
+        order: start.order,
+        poles,
+        zeros,
+        non_minimum_phase,
     }
 }
 
