@@ -102,6 +102,13 @@ pub struct CmifInitReport {
     pub completion: Option<CompleteReport>,
 }
 
+#[typetag::serde(name = "cmif")]
+impl frf_data::LinkDetails for CmifInitReport {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
 /// The CMIF + convex-numerator initialiser (section 3.3 and 4.4 of the wafer-stage
 /// paper): poles at the CMIF peaks with damping `zeta0`, a rigid body chosen from the
 /// data, numerators from the convex problem (24).
@@ -337,6 +344,13 @@ pub struct RivReport {
     pub start: String,
     /// Mode additions and removals of the adaptation.
     pub adapt: Option<AdaptReport>,
+}
+
+#[typetag::serde(name = "riv")]
+impl frf_data::LinkDetails for RivReport {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
 }
 
 /// The refined-IV refiner of the chain (Algorithm 1 of the wafer-stage paper with the

@@ -89,6 +89,13 @@ pub struct FitterReport {
     pub band_hz: (f64, f64),
 }
 
+#[typetag::serde(name = "additive_riv")]
+impl frf_data::LinkDetails for FitterReport {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
 /// The whole additive-RIV method as an initialiser-plus-refiner ([`Estimator`] with
 /// `Start = ()`): data in, `Fit<AdditiveModel>` out. The report of the last run is kept
 /// in the returned fit's messages; [`AdditiveFitter::fit`] also returns it structured.

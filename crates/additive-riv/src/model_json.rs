@@ -624,6 +624,57 @@ mod tests {
         assert!(e.contains("rigid_body.integrators"), "{e}");
     }
 
+    /// A link's own report is written with its kind and reads back as its type; a file
+    /// whose report carries no kind (written before the tag) still opens, without it.
+    #[test]
+    fn link_reports_read_back_as_their_type() {
+        let mut m = AdditiveModel::new(1, 1, Domain::Continuous).unwrap();
+        m.push_mode(10.0, 0.1, false).unwrap();
+        let report = crate::chain::RivReport {
+            weighting: "inverse variance".into(),
+            ..Default::default()
+        };
+        let link = frf_data::LinkReport {
+            link: "riv".into(),
+            estimator: "refined IV".into(),
+            iterations: 3,
+            convergence: frf_data::Convergence::Direct,
+            cost_history: vec![2.0, 1.0, 1.0],
+            timings: vec![],
+            messages: vec![],
+            details: Some(std::sync::Arc::new(report)),
+        };
+        let prov = Provenance {
+            chain: vec!["riv".into()],
+            links: vec![link],
+            ..Default::default()
+        };
+        let f = ModelFile::from_model(&m, None, None, prov).unwrap();
+        let text = serde_json::to_string(&f).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let details = &v["provenance"]["links"][0]["details"];
+        assert_eq!(details["report"], "riv", "{details}");
+        assert_eq!(details["weighting"], "inverse variance", "{details}");
+        let back: ModelFile = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.provenance, f.provenance);
+        let r = back.provenance.links[0]
+            .details_as::<crate::chain::RivReport>()
+            .expect("the riv report reads back as RivReport");
+        assert_eq!(r.weighting, "inverse variance");
+        assert!(back.provenance.links[0]
+            .details_as::<crate::chain::CmifInitReport>()
+            .is_none());
+        let mut old = v.clone();
+        old["provenance"]["links"][0]["details"]
+            .as_object_mut()
+            .unwrap()
+            .remove("report");
+        let back: ModelFile = serde_json::from_value(old).unwrap();
+        assert!(back.provenance.links[0].details.is_none());
+        assert_eq!(back.provenance.links[0].iterations, 3);
+        back.to_model().expect("an old file still opens");
+    }
+
     fn two_mode_file(fit_delay: bool) -> ModelFile {
         let mut m = AdditiveModel::new(2, 1, Domain::Continuous).unwrap();
         m.push_mode(10.0, 0.1, false).unwrap();

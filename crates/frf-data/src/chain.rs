@@ -162,6 +162,18 @@ impl From<FrfModel> for ChainModel {
     }
 }
 
+/// An estimator's own report (its weighting, the peaks it picked, the modes' standard
+/// deviations, ...) as a link carries it: typed, and serialised with its kind in the
+/// field `report`, so that the model file reads back into the same type.
+///
+/// Every estimator crate registers its report type (`#[typetag::serde(name = ...)]`);
+/// a reader gets it back with [`LinkReport::details_as`].
+#[typetag::serde(tag = "report")]
+pub trait LinkDetails: std::fmt::Debug + Send + Sync + Any {
+    /// The report as [`Any`], for [`LinkReport::details_as`].
+    fn as_any(&self) -> &dyn Any;
+}
+
 /// What one link did, as the model file and `summary.json` record it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LinkReport {
@@ -179,13 +191,16 @@ pub struct LinkReport {
     pub timings: Vec<Timing>,
     /// Notes for the user.
     pub messages: Vec<String>,
-    /// The estimator's own report, serialised.
-    pub details: serde_json::Value,
+    /// The estimator's own report, typed ([`LinkReport::details_as`]); `null` in the file
+    /// when the link has none, and `None` when read from a file written before the
+    /// reports carried their kind (`report`).
+    #[serde(default, with = "details_serde")]
+    pub details: Option<Arc<dyn LinkDetails>>,
 }
 
 impl LinkReport {
     /// The report of `fit` as link `link`.
-    pub fn of<M, R: Serialize>(link: &str, fit: &Fit<M, R>) -> Self {
+    pub fn of<M, R: LinkDetails + Clone>(link: &str, fit: &Fit<M, R>) -> Self {
         Self {
             link: link.to_string(),
             estimator: fit.estimator.clone(),
@@ -194,8 +209,55 @@ impl LinkReport {
             cost_history: fit.cost_history.clone(),
             timings: fit.timings.clone(),
             messages: fit.messages.clone(),
-            details: serde_json::to_value(&fit.report).unwrap_or(serde_json::Value::Null),
+            details: Some(Arc::new(fit.report.clone())),
         }
+    }
+
+    /// The estimator's own report when it is a `T` (e.g. `ml_refine::MlReport` of the
+    /// `ml` link).
+    pub fn details_as<T: LinkDetails>(&self) -> Option<&T> {
+        self.details
+            .as_deref()
+            .and_then(|r| r.as_any().downcast_ref::<T>())
+    }
+}
+
+/// Equality of two typed reports: the same kind and the same serialised content.
+impl PartialEq for dyn LinkDetails {
+    fn eq(&self, other: &Self) -> bool {
+        match (serde_json::to_string(self), serde_json::to_string(other)) {
+            (Ok(a), Ok(b)) => a == b,
+            _ => false,
+        }
+    }
+}
+
+/// The file form of [`LinkReport::details`]: the typed report, tagged with its kind.
+mod details_serde {
+    use super::LinkDetails;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+    use std::sync::Arc;
+
+    pub fn serialize<S: Serializer>(
+        report: &Option<Arc<dyn LinkDetails>>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        report.as_deref().serialize(s)
+    }
+
+    /// A report of a known kind reads back as its type; one without a kind (files
+    /// written before the tag) or of a kind this build does not know reads as `None`,
+    /// so that such a file still opens.
+    pub fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<Arc<dyn LinkDetails>>, D::Error> {
+        let raw = serde_json::value::Value::deserialize(d)?;
+        if raw.is_null() {
+            return Ok(None);
+        }
+        Ok(serde_json::from_value::<Box<dyn LinkDetails>>(raw)
+            .ok()
+            .map(Arc::from))
     }
 }
 
@@ -264,7 +326,7 @@ pub struct RefineLink<E> {
     pub estimator: E,
 }
 
-fn output<M: ModelStructure + 'static, R: Serialize>(
+fn output<M: ModelStructure + 'static, R: LinkDetails + Clone>(
     name: &str,
     fit: Fit<M, R>,
 ) -> Result<ChainOutput, ChainError> {
@@ -277,6 +339,7 @@ impl<E> Initializer for InitLink<E>
 where
     E: Estimator<Start = ()> + Send + Sync,
     E::Model: 'static,
+    E::Report: LinkDetails,
 {
     fn name(&self) -> &str {
         &self.name
@@ -294,6 +357,7 @@ impl<E> Refiner for RefineLink<E>
 where
     E: Estimator<Start = ChainModel> + Send + Sync,
     E::Model: 'static,
+    E::Report: LinkDetails,
 {
     fn name(&self) -> &str {
         &self.name

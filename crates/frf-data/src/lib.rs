@@ -35,7 +35,7 @@ pub mod weighting;
 
 pub use chain::{
     ChainError, ChainModel, ChainOutput, ChainSettings, DelayChoice, InitLink, Initializer,
-    LinkReport, ModeSelection, Precomputed, RefineLink, Refiner,
+    LinkDetails, LinkReport, ModeSelection, Precomputed, RefineLink, Refiner,
 };
 pub use dataset::FrfDataset;
 pub use error::{FormatProblem, FrfError};

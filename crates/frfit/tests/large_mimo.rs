@@ -561,7 +561,11 @@ fn a_delay_the_residues_take_up_near_exact_data_is_held_or_reported_with_its_pro
         );
     } else {
         assert!(f.delay_fitted, "{msgs}");
-        let std = ml.details["delay_s_std"].as_f64().unwrap();
+        let std = ml
+            .details_as::<ml_refine::MlReport>()
+            .unwrap()
+            .delay_s_std
+            .unwrap();
         assert!(msgs.contains("the delay's profile is flatter"), "{msgs}");
         assert!(std < 1e-6, "std {:.3} us", std * 1e6);
         assert!(
@@ -611,7 +615,11 @@ fn a_flat_delay_profile_widens_the_reported_uncertainty() {
     let ml = out.links.last().unwrap();
     let msgs = ml.messages.join("\n");
     let delay = out.model.model.factors.delay_s;
-    let std = ml.details["delay_s_std"].as_f64().unwrap();
+    let std = ml
+        .details_as::<ml_refine::MlReport>()
+        .unwrap()
+        .delay_s_std
+        .unwrap();
     println!(
         "delay {:.3} us, std {:.3} us\n{msgs}",
         delay * 1e6,

@@ -45,7 +45,7 @@ fn wafer_nominal_cmif_then_ml() {
     };
     let (median, p95) = r.model.model.relative_error(&w, &g).unwrap();
     let ml = r.links.iter().find(|l| l.link == "ml").unwrap();
-    let rep: MlReport = serde_json::from_value(ml.details.clone()).unwrap();
+    let rep: &MlReport = ml.details_as().unwrap();
     let ml_secs = ml
         .timings
         .iter()

@@ -18,21 +18,24 @@
 //!   (30)-(32)) and the delta method for frequencies and damping.
 
 mod basis;
+pub mod config;
 pub mod error;
 mod gram;
 pub mod jacobian;
 pub mod lm;
 mod qr;
 pub mod refine;
+mod search;
 mod shared;
 pub mod stats;
 pub mod varpro;
 mod weight_groups;
 
+pub use config::{CovarianceScale, MlConfig};
 pub use error::MlError;
 pub use jacobian::{currency_jacobian_into, AnalyticModel};
 pub use lm::LmSettings;
-pub use refine::{CovarianceScale, MlConfig, MlRefine, MlReport, ModeUncertainty};
+pub use refine::{MlRefine, MlReport, ModeUncertainty};
 pub use varpro::ResidueForm;
 
 /// Complex double.

@@ -17,129 +17,20 @@
 //! never shrunk). The standard deviations of each mode's natural frequency and damping
 //! follow by the delta method.
 
-use crate::lm::{covariance, iterate, LmSettings};
+pub use crate::config::{CovarianceScale, MlConfig};
+use crate::lm::covariance;
+use crate::search::{
+    add_missed_modes, free_held_delay, rechoose_integrators, retest_modes, Current, Setting,
+};
 use crate::stats::{chi2_upper_tail, normal_upper_tail};
 use crate::varpro::{Layout, Problem, ResidueForm};
 use crate::MlError;
 use crate::C64;
-use frf_data::{ChainModel, Convergence, Estimator, Fit, FrfDataset, ProgressSink, Weighting};
+use frf_data::{ChainModel, Convergence, Estimator, Fit, FrfDataset, Weighting};
 use realize::FrfModel;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 use std::time::Instant;
-
-/// How the covariance of the estimates is scaled.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum CovarianceScale {
-    /// With a measured variance: by `max(1, V / N_dof)`; without: by `V / N_dof` (the
-    /// noise scale estimated from the residual). The default.
-    #[default]
-    Auto,
-    /// The inverse Fisher information with the weights as inverse variances, unscaled.
-    Fisher,
-    /// Always by the cost ratio `V / N_dof`.
-    CostRatio,
-}
-
-/// Settings of [`MlRefine`], with documented defaults.
-#[derive(Debug, Clone)]
-pub struct MlConfig {
-    /// Weighting of the criterion. Default: [`Weighting::Auto`] (inverse variance, the
-    /// ML criterion, when the data carry a variance; eq. (27) of the wafer-stage paper
-    /// otherwise, with the noise scale from the residual).
-    pub weighting: Weighting,
-    /// Parametrisation of the residues. Default: [`ResidueForm::Auto`].
-    pub residues: ResidueForm,
-    /// Fit a feedthrough `D`. Default: `None`, when the start has a nonzero one.
-    pub feedthrough: Option<bool>,
-    /// Realizations the variance was estimated from, when known: sets the expected cost
-    /// ratio `(R - 1) / (R - 2)` of the cost test. Default: `None` (the variance is
-    /// taken as exact).
-    pub realizations: Option<usize>,
-    /// Covariance scaling. Default: [`CovarianceScale::Auto`].
-    pub covariance: CovarianceScale,
-    /// Iterations and tolerances. Default: [`LmSettings::default`].
-    pub lm: LmSettings,
-    /// Damping given to a start pole pair outside the open left half-plane (a real pole
-    /// is reflected). Default: 0.01.
-    pub zeta_unstable: f64,
-    /// Largest condition number of the column-scaled information matrix before a
-    /// parameter is called not identifiable. Default: 1e13.
-    pub max_condition: f64,
-    /// Modes the refinement may add where the residual shows a resonance the start
-    /// missed (only with a measured variance, while the cost test rejects the model at
-    /// 1e-3), at least: the limit is the larger of this and `add_modes_fraction` of the
-    /// start's pole pairs. Several resonances clear of the model's modes are added in one
-    /// refinement (see the messages). Default: 4; 0 keeps the start's structure.
-    pub add_modes: usize,
-    /// The limit of the added modes relative to the start's pole pairs (rounded up),
-    /// where that is more than `add_modes`: a start misses modes in proportion to its
-    /// size (the subspace start of a large plant merges close pairs; a random 20 x 20
-    /// plant with 50 modes and a rigid body, seed 11, started from 45 pairs, took 5
-    /// additions and reached the noise level, where 4 left a triple cluster at 213 to
-    /// 217 Hz with two modes at 33 times the noise). Default: 0.2.
-    pub add_modes_fraction: f64,
-    /// Smallest F statistic (cost explained per added parameter over the noise scale)
-    /// for an added mode to be kept. Default: 25.
-    pub min_f: f64,
-    /// Times an optimum with unstable poles, or with a pole the data do not determine
-    /// (the weakest direction of an information matrix beyond `max_condition`), is
-    /// answered by dropping those poles (the start had a pole too many: an initialiser
-    /// fitting noise at a high order) and refining again from the optimum without them;
-    /// the cost test may then add a mode back where the residual calls for one. The
-    /// drops are reported in the messages. A start with more than 30 pole pairs may be
-    /// answered this way once per ten of them (a random 20 x 20 plant with 50 modes
-    /// over 10..500 Hz on 2000 uniform lines, seed 32 of `frfit simulate random-modal`,
-    /// crowds ten modes into 10..15 Hz at 0.245 Hz line spacing: five of its subspace
-    /// start's poles there crossed into the right half-plane in turn, and the fourth
-    /// drop ended the fit with an error). Default: 3; 0 reports the unstable or
-    /// unidentifiable optimum as an error.
-    pub unstable_drops: usize,
-    /// With a measured variance, drop a start real pole that explains less than
-    /// `min_f` times the noise per parameter (see [`MlRefine`]'s messages). Default:
-    /// true.
-    pub prune_real_poles: bool,
-    /// With a measured variance, test the integrators of the rigid body at the optimum
-    /// (after the structure adaptation, before a held delay is freed and again after):
-    /// when they explain less than `min_f` times the noise per parameter with the poles
-    /// held (the F test of the mode additions), all of them at once, else the highest
-    /// alone, they are dropped and the refinement continued without them, and the test
-    /// repeated. An initialiser whose start stood far above the noise level keeps
-    /// integrators that took up part of its misfit (random 20 x 20 plants without a
-    /// rigid body: two, of full rank); at the noise level they explain nothing.
-    /// Default: true.
-    pub prune_integrators: bool,
-    /// Progress callback.
-    pub progress: ProgressSink,
-}
-
-impl Default for MlConfig {
-    fn default() -> Self {
-        Self {
-            weighting: Weighting::Auto,
-            residues: ResidueForm::Auto,
-            feedthrough: None,
-            realizations: None,
-            covariance: CovarianceScale::Auto,
-            lm: LmSettings::default(),
-            zeta_unstable: 0.01,
-            max_condition: 1e13,
-            add_modes: 4,
-            add_modes_fraction: 0.2,
-            min_f: 25.0,
-            unstable_drops: 3,
-            prune_real_poles: true,
-            prune_integrators: true,
-            progress: ProgressSink::none(),
-        }
-    }
-}
-
-/// Two modes whose poles are closer than this fraction of their mean `|Re p|` (within
-/// each other's half-power half-bandwidth) share one resonance: an added mode that
-/// shares one is tested again by a refinement without it ([`retest_mode`]).
-const TWIN_FRACTION: f64 = 1.0;
 
 /// The imaginary part of a pole pair, relative to its magnitude, at or below which the
 /// pair is critically damped (damping above 0.9998): a pair of real poles whose
@@ -236,6 +127,13 @@ pub struct MlReport {
     pub jacobians: usize,
 }
 
+#[typetag::serde(name = "ml")]
+impl frf_data::LinkDetails for MlReport {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
 /// The maximum-likelihood refiner (Gauss-Newton / Levenberg-Marquardt with variable
 /// projection) of the chain, from any [`ChainModel`]'s currency.
 #[derive(Debug, Clone, Default)]
@@ -287,99 +185,6 @@ fn describe_param(lay: &Layout, theta: &[f64], idx: usize, model: &FrfModel) -> 
     }
     "a parameter".into()
 }
-
-/// `E{V / N_dof}` with a variance from `realizations` realizations (`(R-1)/(R-2)`), 1
-/// when it is taken as exact.
-fn expected_ratio(realizations: Option<usize>) -> f64 {
-    match realizations {
-        Some(r) if r >= 4 => (r as f64 - 1.0) / (r as f64 - 2.0),
-        _ => 1.0,
-    }
-}
-
-/// Where the residual calls for modes the model lacks, strongest first: the line of the
-/// largest (five-line smoothed) weighted residual energy away from the model's modes
-/// (within two line spacings of a mode its own misfit is the residual's cause), then,
-/// up to `max` in all, the other local maxima of that energy that stand clear of every
-/// mode (beyond three half-power bandwidths, where the misfit of a mode no longer
-/// reaches), above [`GROUP_PEAK_FRACTION`] of the largest and [`GROUP_PEAK_OVER_MEDIAN`]
-/// times the median line: resonances the start missed altogether, which one refinement
-/// can add together instead of one refinement each. Frequencies in Hz.
-fn residual_peaks(prob: &Problem, theta: &[f64], coef: &[f64], w: &[f64], max: usize) -> Vec<f64> {
-    let fm = prob.model(theta, coef);
-    let Ok(resp) = fm.freq_response(&prob.omega) else {
-        return Vec::new();
-    };
-    let (n, m) = (prob.omega.len(), prob.lay.m());
-    if n == 0 || max == 0 {
-        return Vec::new();
-    }
-    let s: Vec<f64> = (0..n)
-        .map(|k| {
-            (0..m)
-                .map(|e| w[k * m + e] * (prob.g[k * m + e] - resp.values[k * m + e]).norm_sqr())
-                .sum()
-        })
-        .collect();
-    let smooth: Vec<f64> = (0..n)
-        .map(|k| s[k.saturating_sub(2)..(k + 3).min(n)].iter().sum())
-        .collect();
-    let dw = (prob.omega[n - 1] - prob.omega[0]) / (n.max(2) - 1) as f64;
-    let near = |wk: f64| {
-        fm.modal
-            .pairs
-            .iter()
-            .any(|p| (p.omega_n() - wk).abs() <= 2.0 * dw)
-    };
-    let Some(top) = (0..n)
-        .filter(|&k| !near(prob.omega[k]))
-        .max_by(|&a, &b| smooth[a].total_cmp(&smooth[b]))
-    else {
-        return Vec::new();
-    };
-    let mut peaks = vec![top];
-    let clear = |wk: f64| {
-        fm.modal.pairs.iter().all(|p| {
-            let wn = p.omega_n();
-            (wn - wk).abs() > (3.0 * p.zeta().abs() * wn).max(2.0 * dw)
-        })
-    };
-    let mut sorted = smooth.clone();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[n / 2];
-    let floor = (GROUP_PEAK_FRACTION * smooth[top]).max(GROUP_PEAK_OVER_MEDIAN * median);
-    let half = GROUP_PEAK_HALF_WINDOW.max(n / 400);
-    let mut others: Vec<usize> = (0..n)
-        .filter(|&k| {
-            k != top
-                && smooth[k] >= floor
-                && (k.saturating_sub(half)..(k + half + 1).min(n)).all(|j| smooth[j] <= smooth[k])
-                && clear(prob.omega[k])
-        })
-        .collect();
-    others.sort_by(|&a, &b| smooth[b].total_cmp(&smooth[a]));
-    for k in others {
-        if peaks.len() >= max {
-            break;
-        }
-        if peaks.iter().all(|&q: &usize| q.abs_diff(k) > half) {
-            peaks.push(k);
-        }
-    }
-    peaks.into_iter().map(|k| prob.omega[k] / TAU).collect()
-}
-
-/// The cost ratio `V / N_dof`, in units of the expected one, above which the structure
-/// adaptation looks for missed modes (with a chi-square p-value below 1e-3).
-const ADAPT_RATIO: f64 = 1.2;
-
-/// A further residual peak joins the group of added modes above this fraction of the
-/// largest one ([`residual_peaks`]).
-const GROUP_PEAK_FRACTION: f64 = 0.05;
-/// ... and above this many times the median line's smoothed residual energy.
-const GROUP_PEAK_OVER_MEDIAN: f64 = 20.0;
-/// Lines either side within which a residual peak must be the largest.
-const GROUP_PEAK_HALF_WINDOW: usize = 5;
 
 /// The projected problem of a model on the data ([`MlRefine::projected`]).
 struct Projected {
@@ -801,35 +606,7 @@ impl MlRefine {
         }
         model.validate()?;
         let mut messages = carried;
-        // the start: stable poles, pairs above the real axis
-        for p in &mut model.modal.pairs {
-            if p.pole.im.is_nan() || p.pole.im <= 0.0 {
-                return Err(MlError::invalid(
-                    "start pole pair",
-                    p.pole,
-                    "the pole of a pair must have a positive imaginary part",
-                ));
-            }
-            if p.pole.re >= 0.0 {
-                let wn = p.pole.norm();
-                let z = cfg.zeta_unstable;
-                messages.push(format!(
-                    "start mode at {:.2} Hz has damping {:.3e} (not stable): started with damping {z}",
-                    wn / TAU,
-                    -p.pole.re / wn
-                ));
-                p.pole = C64::new(-z * wn, wn * (1.0 - z * z).sqrt());
-            }
-        }
-        for p in &mut model.modal.real_poles {
-            if p.pole >= 0.0 {
-                messages.push(format!(
-                    "start real pole at {:.3e} rad/s is not stable: reflected",
-                    p.pole
-                ));
-                p.pole = -p.pole.abs().max(1e-9);
-            }
-        }
+        stabilise_start(&mut model, cfg.zeta_unstable, &mut messages)?;
         let Projected {
             prob,
             lay,
@@ -843,443 +620,74 @@ impl MlRefine {
             w,
         } = self.projected(data, &model, "start model", " at the start")?;
         let const_num = lay.const_num;
-        if measured && cfg.prune_real_poles && !model.modal.real_poles.is_empty() {
-            // a start real pole that explains less than `min_f` times the noise per
-            // parameter (the residues of every entry and the pole) is dropped before the
-            // iterations: an initialiser at a high order fits noise with real poles,
-            // which the iterations then push unstable or off to infinity
-            let mut weakest: Option<(usize, f64)> = None;
-            for r in 0..model.modal.real_poles.len() {
-                let mut m2 = model.clone();
-                m2.modal.real_poles.remove(r);
-                let lay2 = Layout {
-                    n_real: lay.n_real - 1,
-                    ..lay.clone()
-                };
-                let p2 = prob.with_layout(lay2.clone(), m2.clone());
-                if let Ok(ev2) = p2.evaluate(&nonlinear_start(&m2, &lay2)) {
-                    let f = (ev2.cost - eval0.cost) / (lay.m() + 1) as f64;
-                    if weakest.is_none_or(|(_, fw)| f < fw) {
-                        weakest = Some((r, f));
-                    }
-                }
-            }
-            if let Some((r, f)) = weakest.filter(|(_, f)| *f < cfg.min_f) {
-                let pole = model.modal.real_poles[r].pole;
-                let mut m2 = model.clone();
-                m2.modal.real_poles.remove(r);
-                if m2.modal.pairs.len() + m2.modal.real_poles.len() + m2.modal.rigid.len() > 0 {
-                    messages.push(format!(
-                            "start real pole at {pole:.3e} rad/s explains {f:.2} times the noise per parameter (< {}): dropped before the iterations",
-                            cfg.min_f
-                        ));
-                    return self.estimate_from(data, m2, drops, (messages, added_before));
-                }
-            }
-        }
-        let valid = |np: usize| {
-            move |t: &[f64]| t.iter().all(|x| x.is_finite()) && (0..np).all(|q| t[2 * q + 1] > 0.0)
-        };
-        // a pole that crosses into the right half-plane, or a real pole beyond 1e4 times
-        // the highest line (a constant in the band: the feedthrough's job), stops the
-        // iterations; the pole is then dropped (`unstable_drops`)
-        let w_top = data.omegas().iter().cloned().fold(0.0f64, f64::max);
-        let leaving = |np: usize, nr: usize| {
-            move |t: &[f64]| -> Option<String> {
-                for q in 0..np {
-                    if t[2 * q] >= 0.0 {
-                        return Some(format!(
-                            "the mode at {:.2} Hz crossed into the right half-plane",
-                            t[2 * q + 1] / TAU
-                        ));
-                    }
-                    if t[2 * q + 1] > 1e4 * w_top {
-                        return Some(format!(
-                            "a mode ran off to {:.3e} Hz (1e4 times the band)",
-                            t[2 * q + 1] / TAU
-                        ));
-                    }
-                }
-                for r in 0..nr {
-                    let p = t[2 * np + r];
-                    if p >= 0.0 {
-                        return Some(format!(
-                            "a real pole crossed into the right half-plane ({p:.3e} rad/s)"
-                        ));
-                    }
-                    if p < -1e4 * w_top {
-                        return Some(format!(
-                            "a real pole ran off to {p:.3e} rad/s (1e4 times the band)"
-                        ));
-                    }
-                }
-                None
-            }
-        };
-        // the cost test of the structure adaptation: with the variance, a cost the noise
-        // does not explain (a variance from R realizations alone raises the ratio to
-        // (R-1)/(R-2), 2 for R = 3: only a ratio beyond twice the expected one counts)
-        let misfit_over = |cost: f64, n_params: usize, factor: f64| {
-            let dof = (n * m) as f64 - n_params as f64 / 2.0;
-            measured
-                && chi2_upper_tail(2.0 * cost, 2.0 * dof) < 1e-3
-                && cost / dof > factor * expected_ratio(cfg.realizations)
-        };
-        let misfit = |cost: f64, n_params: usize| misfit_over(cost, n_params, 2.0);
-        // the structure adaptation tries a residual peak from a lower ratio: the F test
-        // of an added mode scales by the residual itself, so a variance that comes out
-        // low (few realizations) costs one refinement that fails the test, while a
-        // model that lacks modes at a higher noise (a random 20 x 20 plant with 50 modes
-        // at 1 % noise, seed 33: three modes missed at a ratio of 1.71) gets them
-        let lacks_structure = |cost: f64, n_params: usize| misfit_over(cost, n_params, ADAPT_RATIO);
-        // the stop of a gross misfit needs the cost in units of the noise: a measured
-        // variance
-        let lm = LmSettings {
-            gross_misfit_ratio: cfg.lm.gross_misfit_ratio.filter(|_| measured),
-            ..cfg.lm.clone()
-        };
-        // one refinement of `p` (structure `l`, `n_params` parameters) from `theta`,
-        // evaluated as `ev`
-        let refine = |p: &Problem, theta: Vec<f64>, ev, n_params: usize, l: &Layout| {
-            iterate(
-                p,
-                theta,
-                ev,
-                (n * m) as f64 - n_params as f64 / 2.0,
-                &lm,
-                valid(l.n_pairs),
-                leaving(l.n_pairs, l.n_real),
-                &cfg.progress,
-            )
-        };
-        // A free delay is held at the start's value while the start is far above the
-        // noise level, through the iterations and the structure adaptation, and freed
-        // after them when its score test passes: the delay otherwise absorbs the misfit
-        // of the modes the start missed and settles where the added modes no longer fit
-        // (a random 20 x 20 plant with 50 modes and no delay, seed 7: a 29 us delay, 49
-        // modes, 1900 times the noise; with the delay held, every mode and the noise
-        // level).
-        let eval_start_cost = eval0.cost;
-        let (prob, theta, eval0, lay, n_params, held_delay) =
-            if lay.delay && misfit(eval0.cost, n_params) {
-                let lay_h = Layout {
-                    delay: false,
-                    ..lay.clone()
-                };
-                let theta_h = nonlinear_start(&model, &lay_h);
-                let prob_h = prob.with_layout(lay_h.clone(), model.clone());
-                match prob_h.evaluate(&theta_h) {
-                    Ok(ev) => {
-                        let np = lay_h.n_nl() + m * lay_h.n_lin();
-                        (prob_h, theta_h, ev, lay_h, np, true)
-                    }
-                    Err(_) => (prob, theta, eval0, lay, n_params, false),
-                }
-            } else {
-                (prob, theta, eval0, lay, n_params, false)
-            };
-        let t_iter = Instant::now();
-        let mut out = refine(&prob, theta, eval0, n_params, &lay);
-        let mut work = out.work;
-        let mut prob = prob;
-        let mut lay = lay;
-        let mut n_params = n_params;
-        let mut added = added_before;
-        // structure adaptation: a mode the start missed leaves a resonance in the residual
-        // that the cost test rejects; add a mode at its peak and keep it when it explains
-        // more than noise (F test, floor `min_f`)
-        let max_added = if cfg.add_modes == 0 {
-            0
-        } else {
-            // `as` saturates (and takes NaN to 0)
-            let scaled = (cfg.add_modes_fraction.max(0.0) * lay.n_pairs as f64).ceil() as usize;
-            cfg.add_modes.max(scaled)
-        };
-        while added.len() < max_added
-            && out.convergence.is_converged()
-            && lacks_structure(out.eval.cost, n_params)
-        {
-            let peaks = residual_peaks(
-                &prob,
-                &out.theta,
-                &out.eval.coef,
-                &w,
-                max_added - added.len(),
-            );
-            if peaks.is_empty() {
-                break;
-            }
-            // the modes at the given peaks added to the current optimum and refined
-            // together; `None` when the data cannot carry them
-            let refine_with = |new_f: &[f64]| {
-                let mut lay2 = lay.clone();
-                lay2.n_pairs += new_f.len();
-                let n_params2 = lay2.n_nl() + m * lay2.n_lin();
-                if 2 * n < lay2.n_lin() + lay2.n_nl() + 1 || 2 * n * m <= n_params2 {
-                    return None;
-                }
-                let np = lay.n_pairs;
-                let z0 = 0.01;
-                let mut theta2 = out.theta[..2 * np].to_vec();
-                for &f in new_f {
-                    let wn = TAU * f;
-                    theta2.extend([-z0 * wn, wn * (1.0 - z0 * z0).sqrt()]);
-                }
-                theta2.extend_from_slice(&out.theta[2 * np..]);
-                let prob2 = prob.with_layout(lay2.clone(), model.clone());
-                let ev2 = prob2.evaluate(&theta2).ok()?;
-                let out2 = refine(&prob2, theta2, ev2, n_params2, &lay2);
-                let f_stat = nested_f(
-                    (out.eval.cost, n_params),
-                    (out2.eval.cost, n_params2),
-                    (n * m) as f64,
-                );
-                Some((prob2, lay2, n_params2, out2, f_stat))
-            };
-            let passes = |o: &crate::lm::LmOutcome, f_stat: f64| {
-                !f_stat.is_nan() && f_stat > cfg.min_f && o.convergence.is_converged()
-            };
-            // several resonances clear of the model's modes: added together first (one
-            // refinement instead of one each); when the group does not pass, the
-            // strongest alone
-            let mut tried = None;
-            if peaks.len() > 1 {
-                if let Some(t) = refine_with(&peaks) {
-                    work = work.add(t.3.work);
-                    if passes(&t.3, t.4) {
-                        tried = Some((peaks.clone(), t));
-                    } else {
-                        messages.push(format!(
-                            "modes added together at {} Hz (the residual's peaks) did not all hold (F = {:.1}, {}): the strongest alone is tried",
-                            peaks.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
-                            t.4,
-                            t.3.convergence.describe()
-                        ));
-                    }
-                }
-            }
-            if tried.is_none() {
-                let Some(t) = refine_with(&peaks[..1]) else {
-                    break;
-                };
-                work = work.add(t.3.work);
-                if !passes(&t.3, t.4) {
-                    messages.push(if t.3.convergence.is_converged() {
-                        format!(
-                            "a mode added at {:.2} Hz (the residual's peak) did not explain more than noise (F = {:.1}): not kept",
-                            peaks[0], t.4
-                        )
-                    } else {
-                        format!(
-                            "a mode added at {:.2} Hz (the residual's peak) did not converge (F = {:.1}, {}): not kept",
-                            peaks[0],
-                            t.4,
-                            t.3.convergence.describe()
-                        )
-                    });
-                    break;
-                }
-                tried = Some((peaks[..1].to_vec(), t));
-            }
-            let Some((new_f, (prob2, lay2, n_params2, out2, f_stat))) = tried else {
-                break;
-            };
-            messages.push(format!(
-                "{} added at {} Hz (the residual's {}; the start missed {}): cost {:.4e} -> {:.4e}, F = {f_stat:.1}",
-                if new_f.len() == 1 { "mode" } else { "modes" },
-                new_f.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
-                if new_f.len() == 1 { "peak" } else { "peaks" },
-                if new_f.len() == 1 { "it" } else { "them" },
-                out.eval.cost,
-                out2.eval.cost
-            ));
-            added.extend(new_f);
-            prob = prob2;
-            lay = lay2;
-            n_params = n_params2;
-            out = out2;
-        }
-        // the rigid body chosen again (`prune_integrators`) at the optimum, before a
-        // held delay is freed (one refinement then continues both) and after
-        let mut delay_freed = !held_delay;
-        loop {
-            while measured
-                && cfg.prune_integrators
-                && lay.n_rigid > 0
-                && out.convergence.is_converged()
-                && lay.n_pairs + lay.n_real + lay.n_rigid > 1
+        if measured && cfg.prune_real_poles {
+            if let Some(m2) =
+                without_weak_real_pole((&prob, &lay), &eval0, &model, cfg.min_f, &mut messages)
             {
-                let test = |keep: usize| {
-                    drop_integrators(
-                        &prob,
-                        &out,
-                        (&lay, n_params),
-                        keep,
-                        &model,
-                        (n * m) as f64,
-                        cfg,
-                        refine,
-                    )
-                };
-                // all of them at once first (one refinement), then the highest alone
-                let all = if lay.n_rigid > 1 && lay.n_pairs + lay.n_real > 0 {
-                    test(0).filter(|s| s.kept.is_some())
-                } else {
-                    None
-                };
-                let Some(step) = all.or_else(|| test(lay.n_rigid - 1)) else {
-                    break;
-                };
-                messages.push(step.message);
-                let Some((prob_d, lay_d, n_params_d, out_d)) = step.kept else {
-                    break;
-                };
-                out = continued(out, out_d, &mut work);
-                prob = prob_d;
-                lay = lay_d;
-                n_params = n_params_d;
-            }
-            if delay_freed {
-                break;
-            }
-            delay_freed = true;
-            if held_delay && leaving(lay.n_pairs, lay.n_real)(&out.theta).is_none() {
-                // the delay freed at the adapted structure's optimum (a refinement that
-                // stopped on a pole leaving the stable region is refined again from its
-                // optimum with the pole dropped, and the delay held again)
-                let lay_f = Layout {
-                    delay: true,
-                    ..lay.clone()
-                };
-                let mut theta_f = out.theta.clone();
-                let at = lay_f.delay_index().unwrap_or(theta_f.len());
-                theta_f.insert(at, model.factors.delay_s);
-                let prob_f = prob.with_layout(lay_f.clone(), model.clone());
-                let n_params_f = lay_f.n_nl() + m * lay_f.n_lin();
-                // the score test of the delay at the held optimum: the Gauss-Newton
-                // decrease of the cost with the delay free, from one Jacobian; a delay
-                // that would explain less than `min_f` times the noise (the test of the
-                // added modes and integrators) stays held instead of being refined in
-                // several iterations to an insignificant value
-                let score = prob_f.evaluate(&theta_f).ok().map(|ev| {
-                    let (r, _) = prob_f.jacobian_r(&theta_f, &ev);
-                    let z2 = crate::lm::linearised_decrease(&r, theta_f.len());
-                    let f_stat = nested_f(
-                        (ev.cost, n_params),
-                        ((ev.cost - 0.5 * z2).max(0.0), n_params_f),
-                        (n * m) as f64,
-                    );
-                    (ev, f_stat)
-                });
-                if let Some((_, f_stat)) = score
-                    .as_ref()
-                    .filter(|(_, f)| f.is_nan() || *f <= cfg.min_f)
-                {
-                    messages.push(format!(
-                        "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and stays held after the structure adaptation: freed, it would explain {f_stat:.2} times the noise (the linearised decrease at the optimum, F <= {})",
-                        model.factors.delay_s * 1e6,
-                        eval_start_cost,
-                        cfg.min_f
-                    ));
-                } else if let Some((ev, _)) = score {
-                    let out_f = refine(&prob_f, theta_f, ev, n_params_f, &lay_f);
-                    messages.push(format!(
-                        "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and freed after the structure adaptation: cost {:.4e} -> {:.4e}",
-                        model.factors.delay_s * 1e6,
-                        eval_start_cost,
-                        out.eval.cost,
-                        out_f.eval.cost
-                    ));
-                    out = continued(out, out_f, &mut work);
-                    prob = prob_f;
-                    lay = lay_f;
-                    n_params = n_params_f;
-                }
+                return self.estimate_from(data, m2, drops, (messages, added_before));
             }
         }
-        // the added modes, and the modes that share a resonance or are narrower than the
-        // line spacing, tested again at the final structure (the delay freed, the
-        // integrators chosen again, the later additions in): an addition judged while
-        // the delay was held far from its value took up the delay's misfit (simulated
-        // wafer-stage plates, seed 4: four modes added at 1000 times the noise, two of
-        // them one pole, none of them in the plant), and a start mode it displaced can
-        // end as a spike beside the resonance the addition took over
-        let mut first_added = lay.n_pairs - added.len();
-        // pairs tested and kept, and whether the refinement without them failed (those are
-        // tested again after a later drop: another spurious mode that ran off in that
-        // refinement may be the one that went)
-        let mut tested: Vec<(usize, bool)> = Vec::new();
-        loop {
-            if !measured {
-                break;
-            }
-            let Some(step) = retest_mode(
-                &prob,
-                &out,
-                (&lay, n_params, first_added),
-                &tested,
-                &model,
-                (n * m) as f64,
-                cfg,
-                refine,
-            ) else {
-                break;
-            };
-            messages.push(step.message);
-            let Some((prob_d, lay_d, n_params_d, out_d)) = step.dropped else {
-                tested.push((step.pair, step.failed));
-                continue;
-            };
-            let q = step.pair;
-            if q >= first_added {
-                added.remove(q - first_added);
-            } else {
-                first_added -= 1;
-            }
-            tested = tested
-                .into_iter()
-                .filter(|t| !t.1)
-                .map(|(k, f)| (if k > q { k - 1 } else { k }, f))
-                .collect();
-            out = continued(out, out_d, &mut work);
-            prob = prob_d;
-            lay = lay_d;
-            n_params = n_params_d;
+        let w_top = data.omegas().iter().cloned().fold(0.0f64, f64::max);
+        let s = Setting::new(cfg, n, m, measured, w_top);
+        let eval_start_cost = eval0.cost;
+        let (start, held_delay) = hold_delay_while_far(
+            &s,
+            Start {
+                prob,
+                lay,
+                theta,
+                ev: eval0,
+                n_params,
+            },
+            &model,
+        );
+        let t_iter = Instant::now();
+        let out = s.refine(
+            &start.prob,
+            start.theta,
+            start.ev,
+            start.n_params,
+            &start.lay,
+        );
+        let mut work = out.work;
+        let mut cur = Current {
+            prob: start.prob,
+            lay: start.lay,
+            n_params: start.n_params,
+            out,
+        };
+        let mut added = added_before;
+        add_missed_modes(
+            &s,
+            &mut cur,
+            (&model, &w),
+            &mut added,
+            &mut work,
+            &mut messages,
+        );
+        // the rigid body chosen again at the optimum, before a held delay is freed (one
+        // refinement then continues both) and after
+        rechoose_integrators(&s, &mut cur, &model, &mut work, &mut messages);
+        if held_delay {
+            free_held_delay(
+                &s,
+                &mut cur,
+                (&model, eval_start_cost),
+                &mut work,
+                &mut messages,
+            );
+            rechoose_integrators(&s, &mut cur, &model, &mut work, &mut messages);
         }
+        let first_added = retest_modes(&s, &mut cur, &model, &mut added, &mut work, &mut messages);
+        let Current {
+            prob,
+            lay,
+            n_params,
+            out,
+        } = cur;
         let np = lay.n_pairs;
         let iter_time = t_iter.elapsed();
         let fitted = prob.model(&out.theta, &out.eval.coef);
-        // the added modes (start frequencies) among the optimum's pairs that `keep` keeps
-        let added_kept = |keep: &dyn Fn(&realize::PolePair) -> bool| -> Vec<f64> {
-            fitted.modal.pairs[first_added..]
-                .iter()
-                .zip(&added)
-                .filter(|(p, _)| keep(p))
-                .map(|(_, f)| *f)
-                .collect()
-        };
-        // unstable optimum
-        let mut bad = Vec::new();
-        for p in &fitted.modal.pairs {
-            if p.pole.re >= 0.0 {
-                bad.push(format!(
-                    "mode at {:.3} Hz with damping {:.3e}",
-                    p.f_hz(),
-                    p.zeta()
-                ));
-            }
-        }
-        for p in &fitted.modal.real_poles {
-            if p.pole >= 0.0 {
-                bad.push(format!("real pole at {:.3e} rad/s", p.pole));
-            }
-        }
-        for (k, d) in fitted.factors.dynamics.iter().enumerate() {
-            if !d.is_stable() {
-                bad.push(format!("dynamics factor {k} ({:?})", d.target));
-            }
-        }
-        let dynamics_stable = fitted.factors.dynamics.iter().all(|d| d.is_stable());
         // a larger start has more poles that a noisy or crowded stretch of the band cannot
         // carry: the limit grows with it (one drop per ten pole pairs beyond the default)
         let drop_limit = if cfg.unstable_drops == 0 {
@@ -1287,69 +695,35 @@ impl MlRefine {
         } else {
             cfg.unstable_drops.max(model.modal.pairs.len().div_ceil(10))
         };
-        let w_top = data.omegas().iter().cloned().fold(0.0f64, f64::max);
-        // a pair the data can carry: within 1e4 times the band, not critically damped
-        let pair_supported = |p: &realize::PolePair| {
-            p.pole.im <= 1e4 * w_top && p.pole.im > CRITICAL_IM * p.pole.norm()
-        };
-        let far: Vec<String> = fitted
-            .modal
-            .real_poles
-            .iter()
-            .filter(|p| p.pole < -1e4 * w_top)
-            .map(|p| {
-                format!(
-                    "real pole at {:.3e} rad/s, 1e4 times beyond the band",
-                    p.pole
-                )
-            })
-            .chain(
-                fitted
-                    .modal
-                    .pairs
-                    .iter()
-                    .filter(|p| !pair_supported(p))
-                    .map(|p| {
-                        if p.pole.im > 1e4 * w_top {
-                            format!("mode at {:.3e} Hz, 1e4 times beyond the band", p.f_hz())
-                        } else {
-                            format!(
-                                "mode at {:.3} Hz with damping {:.6} (critically damped: its frequency is not identifiable)",
-                                p.f_hz(),
-                                p.zeta()
-                            )
-                        }
-                    }),
-            )
-            .collect();
-        if !(bad.is_empty() && far.is_empty()) && drops < drop_limit && dynamics_stable {
-            let mut next = fitted.clone();
-            next.modal
-                .pairs
-                .retain(|p| p.pole.re < 0.0 && pair_supported(p));
-            next.modal
-                .real_poles
-                .retain(|p| p.pole < 0.0 && p.pole >= -1e4 * w_top);
+        let unsupported = Unsupported::of(&fitted, w_top);
+        let dynamics_stable = fitted.factors.dynamics.iter().all(|d| d.is_stable());
+        if !unsupported.is_empty() && drops < drop_limit && dynamics_stable {
+            let next = unsupported.dropped_from(&fitted);
             if next.modal.pairs.len() + next.modal.real_poles.len() + next.modal.rigid.len() > 0 {
                 messages.push(format!(
                     "the optimum had poles the data do not support ({}) after {} iterations ({}): dropped, and refined again from that optimum",
-                    bad.iter().chain(&far).cloned().collect::<Vec<_>>().join(", "),
+                    unsupported.all().join(", "),
                     out.iterations,
                     out.convergence.describe()
                 ));
-                let carried =
-                    added_kept(&|p: &realize::PolePair| p.pole.re < 0.0 && pair_supported(p));
+                // the added modes (start frequencies) that stay
+                let carried: Vec<f64> = fitted.modal.pairs[first_added..]
+                    .iter()
+                    .zip(&added)
+                    .filter(|(p, _)| unsupported.keeps(p))
+                    .map(|(_, f)| *f)
+                    .collect();
                 return self.estimate_from(data, next, drops + 1, (messages, carried));
             }
         }
-        if !bad.is_empty() {
+        if !unsupported.unstable.is_empty() {
             return Err(MlError::Unstable {
-                poles: bad.join(", "),
+                poles: unsupported.unstable.join(", "),
                 hint: "start from another initialiser (--init), drop the mode from the start (--modes), or narrow the band to where the mode is excited".into(),
             });
         }
         // statistics
-        let dof = (n * m) as f64 - n_params as f64 / 2.0;
+        let dof = s.dof(n_params);
         let cost = out.eval.cost;
         let ratio = cost / dof;
         let (expected, p_value) = cost_test(measured, cfg.realizations, cost, dof);
@@ -1511,6 +885,233 @@ impl MlRefine {
     }
 }
 
+/// The start's poles made stable: a pair outside the open left half-plane gets the
+/// damping `zeta_unstable` at its natural frequency, a real pole is reflected, each with
+/// a message; a pair below the real axis is an error.
+fn stabilise_start(
+    model: &mut FrfModel,
+    zeta_unstable: f64,
+    messages: &mut Vec<String>,
+) -> Result<(), MlError> {
+    for p in &mut model.modal.pairs {
+        if p.pole.im.is_nan() || p.pole.im <= 0.0 {
+            return Err(MlError::invalid(
+                "start pole pair",
+                p.pole,
+                "the pole of a pair must have a positive imaginary part",
+            ));
+        }
+        if p.pole.re >= 0.0 {
+            let wn = p.pole.norm();
+            let z = zeta_unstable;
+            messages.push(format!(
+                "start mode at {:.2} Hz has damping {:.3e} (not stable): started with damping {z}",
+                wn / TAU,
+                -p.pole.re / wn
+            ));
+            p.pole = C64::new(-z * wn, wn * (1.0 - z * z).sqrt());
+        }
+    }
+    for p in &mut model.modal.real_poles {
+        if p.pole >= 0.0 {
+            messages.push(format!(
+                "start real pole at {:.3e} rad/s is not stable: reflected",
+                p.pole
+            ));
+            p.pole = -p.pole.abs().max(1e-9);
+        }
+    }
+    Ok(())
+}
+
+/// The start `model` without its weakest real pole, when that pole explains less than
+/// `min_f` times the noise per parameter (the residues of every entry and the pole; the
+/// start problem `prob` with layout `lay`, evaluated as `eval0`) and the model keeps a
+/// pole: an initialiser at a high order fits noise with real poles, which the
+/// iterations then push unstable or off to infinity. `None` otherwise.
+fn without_weak_real_pole(
+    (prob, lay): (&Problem, &Layout),
+    eval0: &crate::varpro::Eval,
+    model: &FrfModel,
+    min_f: f64,
+    messages: &mut Vec<String>,
+) -> Option<FrfModel> {
+    let mut weakest: Option<(usize, f64)> = None;
+    for r in 0..model.modal.real_poles.len() {
+        let mut m2 = model.clone();
+        m2.modal.real_poles.remove(r);
+        let lay2 = Layout {
+            n_real: lay.n_real - 1,
+            ..lay.clone()
+        };
+        let p2 = prob.with_layout(lay2.clone(), m2.clone());
+        if let Ok(ev2) = p2.evaluate(&nonlinear_start(&m2, &lay2)) {
+            let f = (ev2.cost - eval0.cost) / (lay.m() + 1) as f64;
+            if weakest.is_none_or(|(_, fw)| f < fw) {
+                weakest = Some((r, f));
+            }
+        }
+    }
+    let (r, f) = weakest.filter(|(_, f)| *f < min_f)?;
+    let pole = model.modal.real_poles[r].pole;
+    let mut m2 = model.clone();
+    m2.modal.real_poles.remove(r);
+    if m2.modal.pairs.len() + m2.modal.real_poles.len() + m2.modal.rigid.len() == 0 {
+        return None;
+    }
+    messages.push(format!(
+        "start real pole at {pole:.3e} rad/s explains {f:.2} times the noise per parameter (< {min_f}): dropped before the iterations"
+    ));
+    Some(m2)
+}
+
+/// The start of the iterations: the projected problem, its layout, the nonlinear
+/// parameters, their evaluation and the real parameter count.
+struct Start {
+    prob: Problem,
+    lay: Layout,
+    theta: Vec<f64>,
+    ev: crate::varpro::Eval,
+    n_params: usize,
+}
+
+/// A free delay held at the start's value while the start is far above the noise level
+/// ([`Setting::misfit`]), through the iterations and the structure adaptation, and freed
+/// after them when its score test passes ([`free_held_delay`]): the delay otherwise
+/// absorbs the misfit of the modes the start missed and settles where the added modes
+/// no longer fit (a random 20 x 20 plant with 50 modes and no delay, seed 7: a 29 us
+/// delay, 49 modes, 1900 times the noise; with the delay held, every mode and the noise
+/// level). Returns the start to iterate from and whether the delay is held.
+fn hold_delay_while_far(s: &Setting, start: Start, model: &FrfModel) -> (Start, bool) {
+    if !(start.lay.delay && s.misfit(start.ev.cost, start.n_params)) {
+        return (start, false);
+    }
+    let lay = Layout {
+        delay: false,
+        ..start.lay.clone()
+    };
+    let theta = nonlinear_start(model, &lay);
+    let prob = start.prob.with_layout(lay.clone(), model.clone());
+    match prob.evaluate(&theta) {
+        Ok(ev) => {
+            let n_params = lay.n_nl() + s.m * lay.n_lin();
+            (
+                Start {
+                    prob,
+                    lay,
+                    theta,
+                    ev,
+                    n_params,
+                },
+                true,
+            )
+        }
+        Err(_) => (start, false),
+    }
+}
+
+/// The poles of an optimum the data do not support: unstable ones (and unstable dynamics
+/// factors), and those beyond 1e4 times the highest line `w_top` or critically damped
+/// ([`CRITICAL_IM`]), each described for the messages.
+struct Unsupported {
+    /// Poles and factors outside the stable region.
+    unstable: Vec<String>,
+    /// Stable poles the data cannot carry.
+    far: Vec<String>,
+    /// The highest line, rad/s.
+    w_top: f64,
+}
+
+impl Unsupported {
+    fn of(fitted: &FrfModel, w_top: f64) -> Self {
+        let mut unstable = Vec::new();
+        for p in &fitted.modal.pairs {
+            if p.pole.re >= 0.0 {
+                unstable.push(format!(
+                    "mode at {:.3} Hz with damping {:.3e}",
+                    p.f_hz(),
+                    p.zeta()
+                ));
+            }
+        }
+        for p in &fitted.modal.real_poles {
+            if p.pole >= 0.0 {
+                unstable.push(format!("real pole at {:.3e} rad/s", p.pole));
+            }
+        }
+        for (k, d) in fitted.factors.dynamics.iter().enumerate() {
+            if !d.is_stable() {
+                unstable.push(format!("dynamics factor {k} ({:?})", d.target));
+            }
+        }
+        let me = Self {
+            unstable,
+            far: Vec::new(),
+            w_top,
+        };
+        let far = fitted
+            .modal
+            .real_poles
+            .iter()
+            .filter(|p| p.pole < -1e4 * w_top)
+            .map(|p| {
+                format!(
+                    "real pole at {:.3e} rad/s, 1e4 times beyond the band",
+                    p.pole
+                )
+            })
+            .chain(
+                fitted
+                    .modal
+                    .pairs
+                    .iter()
+                    .filter(|p| !me.supported(p))
+                    .map(|p| {
+                        if p.pole.im > 1e4 * w_top {
+                            format!("mode at {:.3e} Hz, 1e4 times beyond the band", p.f_hz())
+                        } else {
+                            format!(
+                                "mode at {:.3} Hz with damping {:.6} (critically damped: its frequency is not identifiable)",
+                                p.f_hz(),
+                                p.zeta()
+                            )
+                        }
+                    }),
+            )
+            .collect();
+        Self { far, ..me }
+    }
+
+    /// A pair the data can carry: within 1e4 times the band, not critically damped.
+    fn supported(&self, p: &realize::PolePair) -> bool {
+        p.pole.im <= 1e4 * self.w_top && p.pole.im > CRITICAL_IM * p.pole.norm()
+    }
+
+    /// A pair that stays: stable and supported.
+    fn keeps(&self, p: &realize::PolePair) -> bool {
+        p.pole.re < 0.0 && self.supported(p)
+    }
+
+    fn is_empty(&self) -> bool {
+        self.unstable.is_empty() && self.far.is_empty()
+    }
+
+    fn all(&self) -> Vec<String> {
+        self.unstable.iter().chain(&self.far).cloned().collect()
+    }
+
+    /// `fitted` without the poles that do not stay.
+    fn dropped_from(&self, fitted: &FrfModel) -> FrfModel {
+        let mut next = fitted.clone();
+        next.modal.pairs.retain(|p| self.keeps(p));
+        let w_top = self.w_top;
+        next.modal
+            .real_poles
+            .retain(|p| p.pole < 0.0 && p.pole >= -1e4 * w_top);
+        next
+    }
+}
+
 /// The cost test of a weighted cost `cost` with `dof` complex degrees of freedom: its
 /// expected ratio `V / N_dof` (1, or `d2 / (d2 - 2)` with `d2 = 2 (R - 1)` for a variance
 /// from `R >= 4` realizations) and the p-value of the observed one (`None` without a
@@ -1578,241 +1179,6 @@ fn mode_uncertainties(
             }
         })
         .collect()
-}
-
-/// The F statistic of the structure tests (a mode added, integrators dropped): the cost
-/// the larger structure (`large`: cost, parameters) explains beyond the smaller
-/// (`small`), per pair of parameters, over the larger's noise scale `cost / N_dof`, with
-/// `observations` complex observations.
-fn nested_f(small: (f64, usize), large: (f64, usize), observations: f64) -> f64 {
-    let dof = observations - large.1 as f64 / 2.0;
-    ((small.0 - large.0) / ((large.1 - small.1) as f64 / 2.0)) / (large.0 / dof)
-}
-
-/// The refinement `next` that continued from the optimum `prev` with another structure:
-/// its work added to `work`, and `prev`'s iterations to its own.
-fn continued(
-    prev: crate::lm::LmOutcome,
-    mut next: crate::lm::LmOutcome,
-    work: &mut crate::lm::Work,
-) -> crate::lm::LmOutcome {
-    *work = work.add(next.work);
-    next.iterations += prev.iterations;
-    next
-}
-
-/// One step of the rigid-body re-choice of [`MlConfig::prune_integrators`]: its message,
-/// and the refinement without the integrators when they were dropped.
-struct IntegratorStep {
-    message: String,
-    kept: Option<(Problem, Layout, usize, crate::lm::LmOutcome)>,
-}
-
-/// The integrators `1/s^(keep+1) .. 1/s^k` of the optimum `out` (structure `lay` with
-/// `k` integrators and `n_params` parameters, `observations` complex observations)
-/// tested by the F test of the mode additions: the cost with them dropped and the poles
-/// held (the linear parameters refitted: variable projection) against the optimum's.
-/// Below [`MlConfig::min_f`] the refinement continues without them (`refine`, given the
-/// parameter count), and they stay dropped when that refinement converges to a cost they
-/// do not significantly lower. `None` when they explain more, or the problem without
-/// them cannot be evaluated.
-#[allow(clippy::too_many_arguments)]
-fn drop_integrators(
-    prob: &Problem,
-    out: &crate::lm::LmOutcome,
-    (lay, n_params): (&Layout, usize),
-    keep: usize,
-    model: &FrfModel,
-    observations: f64,
-    cfg: &MlConfig,
-    refine: impl Fn(&Problem, Vec<f64>, crate::varpro::Eval, usize, &Layout) -> crate::lm::LmOutcome,
-) -> Option<IntegratorStep> {
-    let k = lay.n_rigid;
-    let lay_d = Layout {
-        n_rigid: keep,
-        ..lay.clone()
-    };
-    let n_params_d = lay_d.n_nl() + lay.m() * lay_d.n_lin();
-    let prob_d = prob.with_layout(lay_d.clone(), model.clone());
-    let ev_d = prob_d.evaluate(&out.theta).ok()?;
-    let f_of = |cost_d: f64| {
-        nested_f(
-            (cost_d, n_params_d),
-            (out.eval.cost, n_params),
-            observations,
-        )
-    };
-    let f_held = f_of(ev_d.cost);
-    if f_held.is_nan() || f_held >= cfg.min_f {
-        return None;
-    }
-    let (what, verb) = if keep + 1 == k {
-        (format!("the integrator 1/s^{k}"), "explains")
-    } else {
-        (
-            format!(
-                "the integrators {}",
-                (keep + 1..=k)
-                    .map(|p| format!("1/s^{p}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-            "explain",
-        )
-    };
-    let out_d = refine(&prob_d, out.theta.clone(), ev_d, n_params_d, &lay_d);
-    let f_refined = f_of(out_d.eval.cost);
-    if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
-        return Some(IntegratorStep {
-            message: format!(
-                "{what} {verb} {f_held:.2} times the noise per parameter with the poles held (< {}), but the refinement without them {} (F = {f_refined:.2}): kept",
-                cfg.min_f,
-                if out_d.convergence.is_converged() {
-                    "ended higher".to_string()
-                } else {
-                    out_d.convergence.describe()
-                }
-            ),
-            kept: None,
-        });
-    }
-    Some(IntegratorStep {
-        message: format!(
-            "{what} {verb} {f_held:.2} times the noise per parameter at the optimum (< {}): dropped, cost {:.4e} -> {:.4e} after {} further iterations (F = {f_refined:.2})",
-            cfg.min_f,
-            out.eval.cost,
-            out_d.eval.cost,
-            out_d.iterations
-        ),
-        kept: Some((prob_d, lay_d, n_params_d, out_d)),
-    })
-}
-
-/// One step of the re-test of [`retest_mode`]: its message, the pair tested, and the
-/// refinement without it when it was dropped.
-struct ModeRetest {
-    message: String,
-    pair: usize,
-    /// The refinement without the mode did not converge.
-    failed: bool,
-    dropped: Option<(Problem, Layout, usize, crate::lm::LmOutcome)>,
-}
-
-/// One mode of the optimum `out` (structure `lay`, `n_params` parameters) tested again by
-/// the F test of the mode additions: an added one (pairs `first_added..`), or one that
-/// shares its resonance with another mode (poles within [`TWIN_FRACTION`] of their mean
-/// `|Re p|`: a twin) or is narrower than the line spacing around it (half-power
-/// bandwidth `2 zeta f`: a spike, which can fit the noise of one or two lines), not among
-/// the pairs already `tested` and kept (pair index, and whether that refinement failed). Twins come first, then the others by the cost
-/// they explain with the other poles held (the linear parameters refitted). A twin, or
-/// another candidate below [`MlConfig::min_f`] with the poles held, is tested by the
-/// refinement without it: it is dropped when that refinement converges to a cost the
-/// mode does not significantly lower. Two poles that close act together as one pole
-/// moved (a double pole's derivative term), so holding the other where the pair put it
-/// overstates what one of them explains. `None` when no candidate is left to test.
-#[allow(clippy::too_many_arguments)]
-fn retest_mode(
-    prob: &Problem,
-    out: &crate::lm::LmOutcome,
-    (lay, n_params, first_added): (&Layout, usize, usize),
-    tested: &[(usize, bool)],
-    model: &FrfModel,
-    observations: f64,
-    cfg: &MlConfig,
-    refine: impl Fn(&Problem, Vec<f64>, crate::varpro::Eval, usize, &Layout) -> crate::lm::LmOutcome,
-) -> Option<ModeRetest> {
-    if lay.n_pairs + lay.n_real + lay.n_rigid < 2 {
-        return None;
-    }
-    let lay_d = Layout {
-        n_pairs: lay.n_pairs - 1,
-        ..lay.clone()
-    };
-    let n_params_d = lay_d.n_nl() + lay.m() * lay_d.n_lin();
-    let prob_d = prob.with_layout(lay_d.clone(), model.clone());
-    let f_of = |cost_d: f64| {
-        nested_f(
-            (cost_d, n_params_d),
-            (out.eval.cost, n_params),
-            observations,
-        )
-    };
-    let pole = |q: usize| C64::new(out.theta[2 * q], out.theta[2 * q + 1]);
-    let twin = |q: usize| {
-        (0..lay.n_pairs).filter(|&r| r != q).any(|r| {
-            let (a, b) = (pole(q), pole(r));
-            (a - b).norm() < TWIN_FRACTION * 0.5 * (a.re.abs() + b.re.abs())
-        })
-    };
-    let omega = &prob.omega;
-    let narrow = |q: usize| {
-        let p = pole(q);
-        let k = omega.partition_point(|&w| w < p.norm());
-        let spacing = match (k.checked_sub(1), omega.get(k)) {
-            (Some(a), Some(&b)) => b - omega[a],
-            _ => return false,
-        };
-        2.0 * p.re.abs() < spacing
-    };
-    let without = |q: usize| {
-        let mut t = out.theta.clone();
-        t.drain(2 * q..2 * q + 2);
-        t
-    };
-    // twins first, then by the cost explained with the other poles held
-    let (q, theta_d, ev_d, f_held, suspect) = (0..lay.n_pairs)
-        .filter(|&q| !tested.iter().any(|&(k, _)| k == q))
-        .filter_map(|q| {
-            let suspect = twin(q);
-            if q < first_added && !suspect && !narrow(q) {
-                return None;
-            }
-            let t = without(q);
-            let ev = prob_d.evaluate(&t).ok()?;
-            let f = f_of(ev.cost);
-            (!f.is_nan()).then_some((q, t, ev, f, suspect))
-        })
-        .min_by(|a, b| b.4.cmp(&a.4).then(a.3.total_cmp(&b.3)))?;
-    if f_held >= cfg.min_f && !suspect {
-        return None;
-    }
-    let what = if q >= first_added {
-        "the added mode"
-    } else if suspect {
-        "the mode that shares its resonance with another"
-    } else {
-        "the mode narrower than the line spacing"
-    };
-    let f_hz = pole(q).norm() / TAU;
-    let out_d = refine(&prob_d, theta_d, ev_d, n_params_d, &lay_d);
-    let f_refined = f_of(out_d.eval.cost);
-    if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
-        return Some(ModeRetest {
-            message: format!(
-                "{what} at {f_hz:.2} Hz, tested again at the final structure, explains {f_held:.2} times the noise per parameter with the other poles held, and the refinement without it {} (F = {f_refined:.2}): kept",
-                if out_d.convergence.is_converged() {
-                    "ended higher".to_string()
-                } else {
-                    out_d.convergence.describe()
-                }
-            ),
-            pair: q,
-            failed: !out_d.convergence.is_converged(),
-            dropped: None,
-        });
-    }
-    Some(ModeRetest {
-        message: format!(
-            "{what} at {f_hz:.2} Hz, tested again at the final structure, explains {f_held:.2} times the noise per parameter with the other poles held: dropped, cost {:.4e} -> {:.4e} after {} further iterations (F = {f_refined:.2} < {})",
-            out.eval.cost,
-            out_d.eval.cost,
-            out_d.iterations,
-            cfg.min_f
-        ),
-        pair: q,
-        failed: false,
-        dropped: Some((prob_d, lay_d, n_params_d, out_d)),
-    })
 }
 
 /// The delay's profile of [`delay_profile`].

@@ -225,6 +225,13 @@ pub struct SkReport {
     pub band_hz: (f64, f64),
 }
 
+#[typetag::serde(name = "sk")]
+impl frf_data::LinkDetails for SkReport {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
 /// The Sanathanan-Koerner common-denominator initialiser (Jue, sections 2.2 and 2.4;
 /// McKelvey eq. (36)-(39)).
 #[derive(Debug, Clone, Default)]

@@ -238,6 +238,13 @@ pub struct SubspaceReport {
     pub band_hz: (f64, f64),
 }
 
+#[typetag::serde(name = "subspace")]
+impl frf_data::LinkDetails for SubspaceReport {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
 /// The identified state space and everything the fit found, for callers below the
 /// chain ([`SubspaceInit::identify`]).
 #[derive(Debug, Clone)]

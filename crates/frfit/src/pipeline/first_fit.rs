@@ -420,16 +420,16 @@ pub fn chain_fit(
     let refined_by_riv = result.chain.last().is_some_and(|l| l == "riv");
     let mut report = FitterReport::default();
     for l in &result.links {
-        if let Ok(r) = serde_json::from_value::<CmifInitReport>(l.details.clone()) {
-            report.cmif_peaks = r.cmif_peaks;
-            report.delay_estimate = r.delay_estimate;
+        if let Some(r) = l.details_as::<CmifInitReport>() {
+            report.cmif_peaks = r.cmif_peaks.clone();
+            report.delay_estimate = r.delay_estimate.clone();
             report.integrators = r.integrators;
-            report.weighting = r.weighting;
+            report.weighting = r.weighting.clone();
             report.init_cost = r.init_cost;
             report.band_hz = r.band_hz;
-        } else if let Ok(r) = serde_json::from_value::<RivReport>(l.details.clone()) {
-            report.weighting = r.weighting;
-            report.adapt = r.adapt;
+        } else if let Some(r) = l.details_as::<RivReport>() {
+            report.weighting = r.weighting.clone();
+            report.adapt = r.adapt.clone();
         }
     }
     let last = result

@@ -353,8 +353,8 @@ pub(crate) struct RunRecord<'a> {
 /// model that is the chain's own (`frfit fit`, no diagnosis steps).
 pub(crate) fn ml_uncertainty(links: &[frf_data::LinkReport]) -> Option<UncertaintySummary> {
     let l = links.iter().rev().find(|l| l.link == "ml")?;
-    let r: ml_refine::MlReport = serde_json::from_value(l.details.clone()).ok()?;
-    Some(uncertainty_summary(ML_METHOD, &r))
+    let r = l.details_as::<ml_refine::MlReport>()?;
+    Some(uncertainty_summary(ML_METHOD, r))
 }
 
 /// [`UncertaintySummary::method`] of the ML refiner's covariance at its own optimum.

@@ -215,6 +215,13 @@ pub struct BandsReport {
     pub weighting: String,
 }
 
+#[typetag::serde(name = "sk_bands")]
+impl frf_data::LinkDetails for BandsReport {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
 /// Bayard's multi-band composite SK fit (Jue, section 2.3; see the module
 /// documentation).
 #[derive(Debug, Clone, Default)]
