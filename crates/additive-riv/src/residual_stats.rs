@@ -228,7 +228,7 @@ pub fn cost_of(model: &AdditiveModel, data: &FitData) -> f64 {
 /// poles are closer than `fraction` of their mean `|Re p|`, with that distance over
 /// the mean `|Re p|`: [`DUPLICATE_FRACTION`] finds the poles two submodels cannot both
 /// hold (the drop pass), a fraction of 1 the modes within each other's half-power
-/// half-bandwidth (the diagnosis's twin merge).
+/// half-bandwidth ([`frf_data::twins::TWIN_FRACTION`], the diagnosis's twin merge).
 pub fn close_mode_pairs(model: &AdditiveModel, fraction: f64) -> Vec<(usize, usize, f64)> {
     let poles: Vec<(usize, C64)> = model
         .submodels
@@ -240,9 +240,9 @@ pub fn close_mode_pairs(model: &AdditiveModel, fraction: f64) -> Vec<(usize, usi
     let mut pairs = Vec::new();
     for (k, &(a, pa)) in poles.iter().enumerate() {
         for &(b, pb) in &poles[k + 1..] {
-            let (d, bw) = ((pa - pb).norm(), 0.5 * (pa.re.abs() + pb.re.abs()));
-            if d < fraction * bw {
-                pairs.push((a, b, d / bw));
+            let separation = frf_data::twins::pole_separation(pa, pb);
+            if separation < fraction {
+                pairs.push((a, b, separation));
             }
         }
     }

@@ -30,6 +30,7 @@ pub mod model;
 pub mod shared_data;
 pub mod stats;
 pub mod truth;
+pub mod twins;
 pub mod view;
 pub mod weighting;
 

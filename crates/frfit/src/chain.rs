@@ -32,6 +32,8 @@ use frf_data::{
 use ml_refine::{MlConfig, MlRefine};
 use sk_fit::bands::{BandSpec, MultiBandConfig, MultiBandSk};
 use sk_fit::{SkConfig, SkInit};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 /// The multi-band composite fit of the SK initialiser (Jue 2.3; `--bands`,
 /// `--band-weights`): with it, `--init sk` fits the bands of `spec` with the tiered
@@ -80,6 +82,78 @@ pub struct AdditiveOptions {
     /// whole band (the default). Only `sk` takes bands: [`run_chain`] rejects them for a
     /// chain without it.
     pub sk_bands: Option<SkBands>,
+    /// The initialisers already run on the same data in this run ([`StartCache`]),
+    /// shared by the chains of the pipeline's starts. Default: `None` (every chain runs
+    /// its initialiser).
+    pub starts: Option<StartCache>,
+}
+
+/// The outputs of the initialisers already run in one pipeline run, by initialiser,
+/// settings and data: a chain that starts from the same initialiser with the same
+/// settings on the same data takes its output instead of running it again (the third
+/// start's `sk -> ml` after the second start's `sk -> riv`: SK's common denominator took
+/// 15 s of a 110 s fit of the DaISy flexible structure). The reused link report says so.
+#[derive(Clone, Default)]
+pub struct StartCache(Arc<Mutex<HashMap<String, ChainOutput>>>);
+
+impl std::fmt::Debug for StartCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.0.lock().map_or(0, |m| m.len());
+        write!(f, "StartCache({n} starts)")
+    }
+}
+
+impl StartCache {
+    /// What makes an initialiser's output: its name, every setting it reads, and the
+    /// data (lines, band edges, and the sum of the magnitudes and of the variances).
+    fn key(init: &str, data: DynData<'_>, s: &ChainSettings, o: &AdditiveOptions) -> String {
+        let n = data.n_lines();
+        let mut line = vec![realize::C64::new(0.0, 0.0); data.n_entries()];
+        let mut sum = 0.0;
+        for k in 0..n {
+            data.line_into(k, &mut line);
+            sum += line.iter().map(|v| v.norm()).sum::<f64>();
+        }
+        let var: f64 = data.variance_vec().map_or(0.0, |v| v.iter().sum());
+        let edges = (n > 0).then(|| (data.freq_hz(0), data.freq_hz(n - 1)));
+        format!(
+            "{init}|{n}|{edges:?}|{sum:e}|{var:e}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
+            s.hold,
+            s.delay,
+            s.derivative_order,
+            s.weighting,
+            s.modes,
+            s.peaks,
+            s.order,
+            o.rigid_body,
+            o.complete_start,
+            o.sk_bands
+        )
+    }
+
+    /// The output of `init` on `data` with `s` and `o`: the one of an earlier run when
+    /// there is one (its report with a message saying so), else `run`'s, kept.
+    fn get_or_run(
+        &self,
+        (init, data): (&str, DynData<'_>),
+        s: &ChainSettings,
+        o: &AdditiveOptions,
+        run: impl FnOnce() -> Result<ChainOutput, FrfitError>,
+    ) -> Result<ChainOutput, FrfitError> {
+        let key = Self::key(init, data, s, o);
+        let earlier = self.0.lock().ok().and_then(|m| m.get(&key).cloned());
+        if let Some(mut out) = earlier {
+            out.report.messages.push(format!(
+                "the {init} start of an earlier chain of this run, with the same settings on the same data: reused, not run again"
+            ));
+            return Ok(out);
+        }
+        let out = run()?;
+        if let Ok(mut m) = self.0.lock() {
+            m.insert(key, out.clone());
+        }
+        Ok(out)
+    }
 }
 
 impl Default for AdditiveOptions {
@@ -91,6 +165,7 @@ impl Default for AdditiveOptions {
             realizations: None,
             complete_start: Some(CompleteConfig::default()),
             sk_bands: None,
+            starts: None,
         }
     }
 }
@@ -320,9 +395,11 @@ fn run_once(
     s: &ChainSettings,
     o: &AdditiveOptions,
 ) -> Result<(ChainOutput, Option<ChainOutput>), FrfitError> {
-    let first = initializer(init, s, o)?
-        .initialize(data)
-        .map_err(link_err)?;
+    let run = || initializer(init, s, o)?.initialize(data).map_err(link_err);
+    let first = match &o.starts {
+        Some(cache) => cache.get_or_run((init, data), s, o, run)?,
+        None => run()?,
+    };
     let second = match refiner(refine, s, o)? {
         Some(r) => Some(r.refine(data, &first.model).map_err(link_err)?),
         None => None,

@@ -188,11 +188,6 @@ const GROUP_PEAK_OVER_MEDIAN: f64 = 20.0;
 /// Lines either side within which a residual peak must be the largest.
 const GROUP_PEAK_HALF_WINDOW: usize = 5;
 
-/// Two modes whose poles are closer than this fraction of their mean `|Re p|` (within
-/// each other's half-power half-bandwidth) share one resonance: an added mode that
-/// shares one is tested again by a refinement without it ([`retest_mode`]); frfit's twin merge states the same rule.
-const TWIN_FRACTION: f64 = 1.0;
-
 /// `E{V / N_dof}` with a variance from `realizations` realizations (`(R-1)/(R-2)`), 1
 /// when it is taken as exact.
 pub(crate) fn expected_ratio(realizations: Option<usize>) -> f64 {
@@ -677,7 +672,7 @@ struct ModeRetest {
 
 /// One mode of the optimum `out` (structure `lay`, `n_params` parameters) tested again by
 /// the F test of the mode additions: an added one (pairs `first_added..`), or one that
-/// shares its resonance with another mode (poles within [`TWIN_FRACTION`] of their mean
+/// shares its resonance with another mode (poles within [`frf_data::twins::TWIN_FRACTION`] of their mean
 /// `|Re p|`: a twin) or is narrower than the line spacing around it (half-power
 /// bandwidth `2 zeta f`: a spike, which can fit the noise of one or two lines), not among
 /// the pairs already `tested` and kept (pair index, and whether that refinement failed). Twins come first, then the others by the cost
@@ -709,7 +704,7 @@ fn retest_mode(
     let twin = |q: usize| {
         (0..lay.n_pairs).filter(|&r| r != q).any(|r| {
             let (a, b) = (pole(q), pole(r));
-            (a - b).norm() < TWIN_FRACTION * 0.5 * (a.re.abs() + b.re.abs())
+            frf_data::twins::are_twins(a, b)
         })
     };
     let omega = &prob.omega;

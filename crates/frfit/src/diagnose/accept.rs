@@ -10,6 +10,7 @@ use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::significance::{f_statistic, noise_scale, submodel_cost_increase};
 use additive_riv::structure::{prune_modes, AdaptConfig};
 use additive_riv::AdditiveModel;
+use frf_data::twins::TWIN_FRACTION;
 use frf_data::{Convergence, Fit, ModelStructure};
 
 /// Of the trials that pass their F test, lower the cost of `current` (at
@@ -90,15 +91,12 @@ fn insignificant_without(
     (r.cost.is_finite() && f <= f_crit && stable).then_some((r, f, f_crit))
 }
 
-/// Two modes are twins when their poles are closer than this fraction of their mean
-/// `|Re p|`: within each other's half-power half-bandwidth, where two submodels can
-/// share one resonance between them (the pruning's duplicate test, at
-/// [`additive_riv::residual_stats::DUPLICATE_FRACTION`], holds only poles on practically the
-/// same point).
-const TWIN_FRACTION: f64 = 1.0;
-
 /// The twin pairs of `model` ([`TWIN_FRACTION`], [`close_mode_pairs`]) of stable modes,
-/// as submodel indices, closest first (distance over mean `|Re p|`).
+/// as submodel indices, closest first (distance over mean `|Re p|`). Two modes are
+/// twins when their poles are within each other's half-power half-bandwidth, where two
+/// submodels can share one resonance between them (the pruning's duplicate test, at
+/// [`additive_riv::residual_stats::DUPLICATE_FRACTION`], holds only poles on practically
+/// the same point); the ML refiner's re-test applies the same rule.
 fn twin_pairs(model: &AdditiveModel) -> Vec<(usize, usize)> {
     let stable = |i: usize| {
         model

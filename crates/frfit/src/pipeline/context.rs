@@ -57,6 +57,9 @@ pub struct FitContext {
     /// the report read it, a subspace start does not (at 50 x 50 entries it costs
     /// seconds and hundreds of MB).
     pub(crate) cmif: OnceLock<Arc<Cmif>>,
+    /// The initialisers' outputs of this run's chains (the starts of `fit`'s default
+    /// chain share them: [`crate::chain::StartCache`]).
+    pub(crate) starts: crate::chain::StartCache,
     /// The fit data split into their even and odd lines, made on first use
     /// ([`held_out_halves`](Self::held_out_halves)).
     held_out_halves: OnceLock<Arc<[FitData; 2]>>,
@@ -227,6 +230,7 @@ impl FitContext {
             line_floor,
             floor_noise,
             cmif: OnceLock::new(),
+            starts: crate::chain::StartCache::default(),
             held_out_halves: OnceLock::new(),
             weighting,
             fit_data,

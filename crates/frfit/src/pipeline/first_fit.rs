@@ -380,6 +380,7 @@ pub fn chain_fit(
         // reference files (a spurious second input_dynamics step on the input-lag case)
         complete_start: None,
         sk_bands: cfg.sk_bands.clone(),
+        starts: Some(ctx.starts.clone()),
     };
     let result = run_chain(&ctx.band, &init, &refine, &settings, &opts)?;
     let t_numerators = std::time::Instant::now();
