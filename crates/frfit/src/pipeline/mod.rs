@@ -24,6 +24,6 @@ pub use first_fit::{
 };
 pub use summarize::final_model_summary;
 pub(crate) use summarize::{
-    build_summary, distortion_summary, error_stats, information_uncertainty, ml_uncertainty,
-    response_std, RunRecord,
+    build_summary, distortion_summary, error_stats, information_uncertainty,
+    information_uncertainty_and_response_std, ml_uncertainty, response_std, RunRecord,
 };

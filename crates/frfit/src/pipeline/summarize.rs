@@ -409,6 +409,21 @@ pub(crate) fn information_uncertainty(
     Ok(uncertainty_summary(INFORMATION_METHOD, &r))
 }
 
+/// [`information_uncertainty`] and, for `entries`, [`response_std`] from one information
+/// matrix at `model` (one evaluation, Jacobian and factorisation instead of two).
+pub(crate) fn information_uncertainty_and_response_std(
+    ctx: &FitContext,
+    model: &AdditiveModel,
+    entries: &[usize],
+) -> Result<(UncertaintySummary, Vec<f64>), String> {
+    use frf_data::ModelStructure;
+    let fm = model.to_frf_model().map_err(|e| e.to_string())?;
+    let (r, std) = information_refiner(ctx)
+        .uncertainty_and_response_std_at(&ctx.band, &fm, Some(entries))
+        .map_err(|e| e.to_string())?;
+    Ok((uncertainty_summary(INFORMATION_METHOD, &r), std))
+}
+
 /// The standard deviation of `model`'s response at the band's lines and entries
 /// (layout `[k * m + e]`) from the information of the ML criterion at it (the band on
 /// the report's plots, [`ml_refine::MlRefine::response_std_at`]); the error in words

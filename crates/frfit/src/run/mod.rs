@@ -29,8 +29,8 @@ use crate::diagnose::{
 };
 use crate::pipeline::{
     build_summary, cmif_once, distortion_summary, err, error_stats, first_fit,
-    information_uncertainty, ml_uncertainty, response_std, FirstFit, FitContext, PipelineConfig,
-    RunRecord, Timings,
+    information_uncertainty, information_uncertainty_and_response_std, ml_uncertainty,
+    response_std, FirstFit, FitContext, PipelineConfig, RunRecord, Timings,
 };
 use crate::summary::{StageTime, Summary};
 use crate::FrfitError;
@@ -348,40 +348,58 @@ pub fn run(
     // otherwise (another refiner, or a diagnosis that refitted the model) the information
     // of the ML criterion at the final model
     let t = Instant::now();
-    let uncertainty = match (!cfg.diagnose)
+    let ml_link = (!cfg.diagnose)
         .then(|| ml_uncertainty(&first_links))
-        .flatten()
-    {
-        Some(u) => Some(u),
-        None => match information_uncertainty(&ctx, &fit.model) {
-            Ok(u) => Some(u),
-            Err(why) => {
-                fit.messages
-                    .push(format!("no standard deviations for the final model: {why}"));
-                None
+        .flatten();
+    // the entries the report's figures show (all up to 60, else 48 of them), when the
+    // report is written: the response's standard deviation is computed for them (at 50 x
+    // 50 entries all of them cost a pass over the data)
+    let band_entries = cfg.final_analysis.then(|| {
+        crate::report::plotted_entries(&ctx.band, &final_response, Some(&ctx.noise.variance))
+    });
+    // without the ML link's covariance, one information matrix at the final model gives
+    // both the standard deviations and the band
+    let (information, band_std) = match (&ml_link, &band_entries) {
+        (Some(_), _) => (None, None),
+        (None, Some(entries)) => {
+            match information_uncertainty_and_response_std(&ctx, &fit.model, entries) {
+                Ok((u, std)) => (Some(Ok(u)), Some(Ok(std))),
+                Err(why) => (Some(Err(why)), None),
             }
-        },
+        }
+        (None, None) => (Some(information_uncertainty(&ctx, &fit.model)), None),
+    };
+    let uncertainty = match (ml_link, information) {
+        (Some(u), _) => Some(u),
+        (None, Some(Ok(u))) => Some(u),
+        (None, Some(Err(why))) => {
+            fit.messages
+                .push(format!("no standard deviations for the final model: {why}"));
+            None
+        }
+        (None, None) => None,
     };
     timings.stage("uncertainty", t);
     // the response's standard deviation for the report's plots (only when it is
-    // written: at 50 x 50 entries it costs a pass over the data)
-    let final_response_std = if cfg.final_analysis && uncertainty.is_some() {
-        let t = Instant::now();
-        // the entries the report's figures show (all up to 60, else 48 of them)
-        let entries =
-            crate::report::plotted_entries(&ctx.band, &final_response, Some(&ctx.noise.variance));
-        let s = response_std(&ctx, &fit.model, &entries);
-        timings.stage("response uncertainty", t);
-        match s {
-            Ok(s) => Some(s),
-            Err(why) => {
-                fit.messages
-                    .push(format!("no uncertainty band for the final response: {why}"));
-                None
-            }
+    // written)
+    let band_std = match (band_std, &band_entries) {
+        (Some(s), _) => Some(s),
+        (None, Some(entries)) if uncertainty.is_some() => {
+            let t = Instant::now();
+            let s = response_std(&ctx, &fit.model, entries);
+            timings.stage("response uncertainty", t);
+            Some(s)
         }
-    } else {
-        None
+        _ => None,
+    };
+    let final_response_std = match band_std {
+        Some(Ok(s)) => Some(s),
+        Some(Err(why)) => {
+            fit.messages
+                .push(format!("no uncertainty band for the final response: {why}"));
+            None
+        }
+        None => None,
     };
     timings.stage("total", t0);
     let summary = build_summary(
