@@ -1459,6 +1459,13 @@ fn markdown(
                         fmt_num(u.cost_ratio)
                     ),
                 };
+                let factor_lines = u.factor_lines();
+                if !factor_lines.is_empty() {
+                    let _ = writeln!(md, "\nDynamics factors (+- 2 sigma):\n");
+                    for line in &factor_lines {
+                        let _ = writeln!(md, "- {line}");
+                    }
+                }
                 let _ = writeln!(
                     md,
                     "\nStandard deviations from {} ({}; {test}; covariance scaled by {}).",

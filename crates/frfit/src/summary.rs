@@ -353,6 +353,19 @@ pub struct ModeUncertaintySummary {
     pub zeta_std: f64,
 }
 
+/// A dynamics factor's poles and zeros with standard deviations (a real root has
+/// damping 1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FactorUncertaintySummary {
+    /// What it multiplies: `input j` or `output i` (1-based, as the steps name them) or
+    /// `all`.
+    pub target: String,
+    /// The roots of its denominator.
+    pub poles: Vec<ModeUncertaintySummary>,
+    /// The roots of its numerator (empty for an all-pole factor).
+    pub zeros: Vec<ModeUncertaintySummary>,
+}
+
 /// The uncertainty of the final model from the refiner's covariance at its optimum.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct UncertaintySummary {
@@ -378,9 +391,38 @@ pub struct UncertaintySummary {
     pub delay_s: Option<f64>,
     /// Its standard deviation, seconds.
     pub delay_s_std: Option<f64>,
+    /// Per dynamics factor of the final model, its poles and zeros with standard
+    /// deviations (in the model's order; absent in files written before they were
+    /// reported).
+    #[serde(default)]
+    pub factors: Vec<FactorUncertaintySummary>,
 }
 
 impl UncertaintySummary {
+    /// The dynamics factors' poles and zeros with `+- 2 sigma`, one line each, for the
+    /// terminal and the report: `input 0: pole 1807.2 Hz +- 3.1 Hz (zeta 1)`.
+    pub fn factor_lines(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        for f in &self.factors {
+            for (kind, roots) in [("pole", &f.poles), ("zero", &f.zeros)] {
+                for r in roots.iter() {
+                    let zeta = if r.zeta >= 1.0 - 1e-12 {
+                        "real".to_string()
+                    } else {
+                        format!("zeta {:.4} +- {:.2e}", r.zeta, 2.0 * r.zeta_std)
+                    };
+                    out.push(format!(
+                        "{}: {kind} {:.4} Hz +- {:.2e} Hz ({zeta})",
+                        f.target,
+                        r.f_hz,
+                        2.0 * r.f_hz_std
+                    ));
+                }
+            }
+        }
+        out
+    }
+
     /// Where the standard deviations come from, in words.
     pub fn source(&self) -> String {
         match self.method.as_str() {

@@ -56,6 +56,23 @@ fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
         &clean,
         &["delay", "feedthrough", "output_dynamics", "missed_mode"],
     );
+    // the final model's factor reported with its standard deviation, which covers the
+    // lag's corner (one seed: within 3 sigma)
+    let u = out.summary.uncertainty.as_ref().expect("an uncertainty");
+    assert_eq!(u.factors.len(), 1, "{:?}", u.factors);
+    assert_eq!(u.factors[0].target, "all");
+    let corner = u.factors[0].poles[0];
+    println!(
+        "lag corner {:.3} Hz +- {:.3} Hz (1 sigma), made at {f_c}",
+        corner.f_hz, corner.f_hz_std
+    );
+    assert!(corner.f_hz_std > 0.0 && corner.f_hz_std < 0.01 * f_c);
+    assert!(
+        (corner.f_hz - f_c).abs() < 3.0 * corner.f_hz_std,
+        "corner {:.3} Hz, std {:.3} Hz, made at {f_c}",
+        corner.f_hz,
+        corner.f_hz_std
+    );
 }
 
 #[test]

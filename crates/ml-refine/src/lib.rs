@@ -35,7 +35,7 @@ pub use config::{CovarianceScale, MlConfig};
 pub use error::MlError;
 pub use jacobian::{currency_jacobian_into, AnalyticModel};
 pub use lm::LmSettings;
-pub use refine::{MlRefine, MlReport, ModeUncertainty};
+pub use refine::{FactorUncertainty, MlRefine, MlReport, ModeUncertainty};
 pub use varpro::ResidueForm;
 
 /// Complex double.

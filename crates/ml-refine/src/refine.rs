@@ -70,6 +70,19 @@ pub struct ModeUncertainty {
     pub zeta_std: f64,
 }
 
+/// A dynamics factor's poles and zeros (the upper one of a complex pair; a real root
+/// has damping 1) with the standard deviations of their frequency and damping, from
+/// the covariance of the factor's coefficients by the delta method.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FactorUncertainty {
+    /// What it multiplies.
+    pub target: realize::FactorTarget,
+    /// The roots of its denominator.
+    pub poles: Vec<ModeUncertainty>,
+    /// The roots of its numerator (empty for an all-pole factor).
+    pub zeros: Vec<ModeUncertainty>,
+}
+
 /// What [`MlRefine`] did and found.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct MlReport {
@@ -116,6 +129,10 @@ pub struct MlReport {
     pub delay_s: Option<f64>,
     /// Its standard deviation, seconds.
     pub delay_s_std: Option<f64>,
+    /// Per dynamics factor, its poles and zeros with standard deviations (in the
+    /// model's order).
+    #[serde(default)]
+    pub factors: Vec<FactorUncertainty>,
     /// Start frequencies (Hz) of the modes the refinement added.
     #[serde(default)]
     pub added_modes_hz: Vec<f64>,
@@ -149,7 +166,7 @@ impl Information {
         let Information {
             prob,
             theta,
-            ev: _,
+            ev,
             cov,
             cond,
             cost,
@@ -170,6 +187,12 @@ impl Information {
         let n_nl = lay.n_nl();
         let c = |a: usize, b: usize| cov[b * n_nl + a] * scale;
         let modes = mode_uncertainties(theta, lay.n_pairs, &c);
+        let first_factor = 2 * lay.n_pairs + lay.n_real + usize::from(lay.delay);
+        let factors = factor_uncertainties(
+            &prob.model(theta, &ev.coef).factors.dynamics,
+            first_factor,
+            &c,
+        );
         let mut messages = Vec::new();
         let (delay_s, delay_s_std) = match lay.delay_index() {
             Some(i) => {
@@ -215,6 +238,7 @@ impl Information {
             modes,
             delay_s,
             delay_s_std,
+            factors,
             added_modes_hz: Vec::new(),
             evaluations: 1,
             jacobians: 1,
@@ -812,6 +836,11 @@ impl MlRefine {
         }
         let c = |a: usize, b: usize| cov[b * n_nl + a] * scale;
         let modes = mode_uncertainties(&out.theta, np, &c);
+        let factors = factor_uncertainties(
+            &fitted.factors.dynamics,
+            2 * np + lay.n_real + usize::from(lay.delay),
+            &c,
+        );
         let (delay_s, delay_s_std) = match lay.delay_index() {
             Some(i) => {
                 let fisher = c(i, i).max(0.0).sqrt();
@@ -884,6 +913,7 @@ impl MlRefine {
             modes,
             delay_s,
             delay_s_std,
+            factors,
             added_modes_hz: added,
             evaluations: work.evaluations,
             jacobians: work.jacobians,
@@ -1209,6 +1239,80 @@ fn mode_uncertainties(
         .collect()
 }
 
+/// The poles and zeros of `dynamics` (the fitted factors, whose coefficients are the
+/// nonlinear parameters from index `first` on, each factor's denominator then
+/// numerator) with their standard deviations, `c` the scaled covariance of the
+/// nonlinear parameters. A root `x` of `1 + c_1 x + ... + c_n x^n` moves by
+/// `dx/dc_i = -x^i / P'(x)`; the root in rad/s is `sigma x`, and its frequency and
+/// damping follow as a mode's ([`mode_uncertainties`]).
+fn factor_uncertainties(
+    dynamics: &[realize::DynamicsFactor],
+    first: usize,
+    c: &dyn Fn(usize, usize) -> f64,
+) -> Vec<FactorUncertainty> {
+    let mut off = first;
+    let mut roots_of = |coef: &[f64], sigma: f64| -> Vec<ModeUncertainty> {
+        let at = off;
+        off += coef.len();
+        let Ok(roots) = realize::poly::roots_ascending(coef) else {
+            return Vec::new();
+        };
+        roots
+            .into_iter()
+            .filter(|x| x.im >= 0.0)
+            .map(|x| {
+                // P'(x) and dx/dc_i
+                let dp: C64 = coef
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &ci)| ci * (i + 1) as f64 * x.powu(i as u32))
+                    .sum();
+                let dx: Vec<C64> = (0..coef.len())
+                    .map(|i| -x.powu(i as u32 + 1) / dp)
+                    .collect();
+                let s = x * sigma;
+                let (a, b) = (s.re, s.im);
+                let r = s.norm();
+                // f = r / 2 pi, zeta = -a / r, through (a, b) = sigma (Re x, Im x)
+                let gf = [a / (r * TAU), b / (r * TAU)];
+                let gz = [-b * b / (r * r * r), a * b / (r * r * r)];
+                let grad = |g: [f64; 2]| -> Vec<f64> {
+                    dx.iter()
+                        .map(|d| sigma * (g[0] * d.re + g[1] * d.im))
+                        .collect()
+                };
+                let quad = |g: Vec<f64>| {
+                    let mut v = 0.0;
+                    for (i, gi) in g.iter().enumerate() {
+                        for (j, gj) in g.iter().enumerate() {
+                            v += gi * gj * c(at + i, at + j);
+                        }
+                    }
+                    v.max(0.0).sqrt()
+                };
+                ModeUncertainty {
+                    f_hz: r / TAU,
+                    f_hz_std: quad(grad(gf)),
+                    zeta: -a / r,
+                    zeta_std: quad(grad(gz)),
+                }
+            })
+            .collect()
+    };
+    dynamics
+        .iter()
+        .map(|d| {
+            let poles = roots_of(&d.den, d.scale);
+            let zeros = roots_of(&d.num, d.scale);
+            FactorUncertainty {
+                target: d.target,
+                poles,
+                zeros,
+            }
+        })
+        .collect()
+}
+
 /// The delay's profile of [`delay_profile`].
 struct DelayProfile {
     /// The larger of the two offsets from the optimum at which the cost (poles held)
@@ -1299,3 +1403,94 @@ fn delay_profile(
 /// Most doublings of the step of [`delay_profile`] per side (the search reaches 64
 /// times the information matrix's standard deviation).
 const PROFILE_DOUBLINGS: usize = 6;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realize::{DynamicsFactor, FactorTarget};
+
+    /// The standard deviations of a factor's root frequency and damping against the
+    /// delta method by finite differences of the roots, for a first-order lag, a
+    /// second-order factor and a lead-lag's zero, with a full covariance.
+    #[test]
+    fn factor_roots_carry_the_coefficients_covariance() {
+        let lag = DynamicsFactor::first_order(FactorTarget::Input(1), 1800.0);
+        let mount = DynamicsFactor::second_order(FactorTarget::Output(0), 1700.0, 0.05);
+        let lead = DynamicsFactor::lead_lag(FactorTarget::All, 300.0, 900.0);
+        let dynamics = vec![lag, mount, lead];
+        // coefficients from index 3 on: lag a1; mount a1, a2; lead a1, b1
+        let first = 3;
+        let n = first + 5;
+        let sd = [0.0, 0.0, 0.0, 2e-3, 4e-3, 3e-3, 1e-3, 5e-3];
+        let corr = |i: usize, j: usize| if i == j { 1.0 } else { 0.3 };
+        let c = |i: usize, j: usize| sd[i] * sd[j] * corr(i, j);
+        let got = factor_uncertainties(&dynamics, first, &c);
+        assert_eq!(got.len(), 3);
+        assert_eq!(got[0].target, FactorTarget::Input(1));
+        assert!((got[0].poles[0].f_hz - 1800.0).abs() < 1e-9);
+        // first order: f = sigma / (2 pi a1), std f = f std(a1) / a1 (a1 = 1)
+        assert!((got[0].poles[0].f_hz_std - 1800.0 * 2e-3).abs() < 1e-9);
+        assert!((got[1].poles[0].zeta - 0.05).abs() < 1e-12);
+        assert_eq!(got[2].zeros.len(), 1);
+        assert!((got[2].zeros[0].f_hz - 300.0).abs() < 1e-9);
+        // finite differences of (f, zeta) of each root in the coefficients
+        let roots = |d: &[DynamicsFactor]| -> Vec<(f64, f64)> {
+            d.iter()
+                .flat_map(|f| {
+                    f.poles()
+                        .into_iter()
+                        .chain(f.zeros())
+                        .filter(|p| p.im >= 0.0)
+                        .map(|p| (p.norm() / TAU, -p.re / p.norm()))
+                        .collect::<Vec<_>>()
+                })
+                .collect()
+        };
+        let base = roots(&dynamics);
+        let h = 1e-7;
+        let mut grads = vec![vec![(0.0, 0.0); n]; base.len()];
+        for i in first..n {
+            let mut d = dynamics.clone();
+            let mut k = first;
+            for f in &mut d {
+                for v in f.den.iter_mut().chain(f.num.iter_mut()) {
+                    if k == i {
+                        *v += h;
+                    }
+                    k += 1;
+                }
+            }
+            for (r, moved) in roots(&d).into_iter().enumerate() {
+                grads[r][i] = ((moved.0 - base[r].0) / h, (moved.1 - base[r].1) / h);
+            }
+        }
+        let got_roots: Vec<&ModeUncertainty> = got
+            .iter()
+            .flat_map(|f| f.poles.iter().chain(&f.zeros))
+            .collect();
+        assert_eq!(got_roots.len(), base.len());
+        for (r, g) in grads.iter().enumerate() {
+            let var = |pick: &dyn Fn((f64, f64)) -> f64| {
+                let mut v = 0.0;
+                for i in first..n {
+                    for j in first..n {
+                        v += pick(g[i]) * pick(g[j]) * c(i, j);
+                    }
+                }
+                v.sqrt()
+            };
+            let (sf, sz) = (var(&|x| x.0), var(&|x| x.1));
+            let u = got_roots[r];
+            assert!(
+                (u.f_hz_std - sf).abs() <= 1e-4 * sf.max(1e-9),
+                "root {r}: f std {} against {sf}",
+                u.f_hz_std
+            );
+            assert!(
+                (u.zeta_std - sz).abs() <= 1e-4 * sz.max(1e-6) + 1e-9,
+                "root {r}: zeta std {} against {sz}",
+                u.zeta_std
+            );
+        }
+    }
+}

@@ -51,6 +51,9 @@ pub fn print_fit(out: &PipelineOutput) {
                     None => println!("  {:>10.4}  {:>10}  {:>10.5}", m.f_hz, "", m.zeta),
                 }
             }
+            for line in u.factor_lines() {
+                println!("  dynamics factor, {line}");
+            }
             match u.p_value {
                 Some(p) => println!(
                     "uncertainty from {} ({}), cost ratio V/N_dof {:.3} (expected {:.3}, p = {p:.2e})",

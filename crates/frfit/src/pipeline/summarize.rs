@@ -364,14 +364,24 @@ pub const ML_METHOD: &str = "ml";
 pub const INFORMATION_METHOD: &str = "information";
 
 fn uncertainty_summary(method: &str, r: &ml_refine::MlReport) -> UncertaintySummary {
-    let mut modes: Vec<ModeUncertaintySummary> = r
-        .modes
+    let summary_of = |m: &ml_refine::ModeUncertainty| ModeUncertaintySummary {
+        f_hz: m.f_hz,
+        f_hz_std: m.f_hz_std,
+        zeta: m.zeta,
+        zeta_std: m.zeta_std,
+    };
+    let mut modes: Vec<ModeUncertaintySummary> = r.modes.iter().map(summary_of).collect();
+    let factors = r
+        .factors
         .iter()
-        .map(|m| ModeUncertaintySummary {
-            f_hz: m.f_hz,
-            f_hz_std: m.f_hz_std,
-            zeta: m.zeta,
-            zeta_std: m.zeta_std,
+        .map(|f| crate::summary::FactorUncertaintySummary {
+            target: match f.target {
+                realize::FactorTarget::Input(j) => format!("input {}", j + 1),
+                realize::FactorTarget::Output(i) => format!("output {}", i + 1),
+                realize::FactorTarget::All => "all".into(),
+            },
+            poles: f.poles.iter().map(summary_of).collect(),
+            zeros: f.zeros.iter().map(summary_of).collect(),
         })
         .collect();
     modes.sort_by(|a, b| a.f_hz.total_cmp(&b.f_hz));
@@ -385,6 +395,7 @@ fn uncertainty_summary(method: &str, r: &ml_refine::MlReport) -> UncertaintySumm
         modes,
         delay_s: r.delay_s,
         delay_s_std: r.delay_s_std,
+        factors,
     }
 }
 
