@@ -68,6 +68,31 @@ pub struct ModeStd {
     pub zeta_std: f64,
 }
 
+/// A root (pole or zero) of a dynamics factor with the standard deviations of its
+/// frequency and damping (a real root has damping 1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RootStd {
+    /// Frequency `|s| / 2 pi`, Hz.
+    pub f_hz: f64,
+    /// Its standard deviation, Hz.
+    pub f_hz_std: f64,
+    /// Relative damping `-Re s / |s|`.
+    pub zeta: f64,
+    /// Its standard deviation.
+    pub zeta_std: f64,
+}
+
+/// The standard deviations of one dynamics factor's poles and zeros (the upper root of
+/// a complex pair), from a refiner's covariance.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct FactorStd {
+    /// The roots of its denominator.
+    pub poles: Vec<RootStd>,
+    /// The roots of its numerator.
+    #[serde(default)]
+    pub zeros: Vec<RootStd>,
+}
+
 /// The rigid-body part `sum_k R_k / s^k`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RigidBodyJson {
@@ -194,6 +219,10 @@ pub struct ModelFile {
     /// form, like the delay): `1 / (1 + a~_1 s/scale + ...)`.
     #[serde(default)]
     pub dynamics: Vec<crate::model::DynamicsFactor>,
+    /// Per entry of `dynamics`, in its order, the standard deviations of the factor's
+    /// poles and zeros when the refiner computed a covariance; absent otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dynamics_std: Vec<FactorStd>,
     /// How the model was obtained.
     pub provenance: Provenance,
 }
@@ -304,6 +333,7 @@ impl ModelFile {
                 })
                 .collect(),
             dynamics: model.dynamics.clone(),
+            dynamics_std: Vec::new(),
             provenance,
         })
     }
@@ -442,6 +472,27 @@ impl ModelFile {
             }
         }
         check("delay_s_std".into(), self.delay_s_std)?;
+        if !self.dynamics_std.is_empty() && self.dynamics_std.len() != self.dynamics.len() {
+            return Err(RivError::Structure(format!(
+                "dynamics_std lists {} factors but dynamics holds {}",
+                self.dynamics_std.len(),
+                self.dynamics.len()
+            )));
+        }
+        for (k, f) in self.dynamics_std.iter().enumerate() {
+            for (kind, roots) in [("poles", &f.poles), ("zeros", &f.zeros)] {
+                for (r, root) in roots.iter().enumerate() {
+                    check(
+                        format!("dynamics_std[{k}].{kind}[{r}].f_hz_std"),
+                        Some(root.f_hz_std),
+                    )?;
+                    check(
+                        format!("dynamics_std[{k}].{kind}[{r}].zeta_std"),
+                        Some(root.zeta_std),
+                    )?;
+                }
+            }
+        }
         if self.delay_s_std.is_some() && !self.delay_fitted {
             return Err(RivError::Structure(
                 "delay_s_std is given but delay_fitted is false: only a fitted delay has a standard deviation".into(),
@@ -478,6 +529,18 @@ impl ModelFile {
             m.zeta_std = Some(near.zeta_std);
         }
         next.delay_s_std = delay_s_std;
+        next.check_uncertainty()?;
+        *self = next;
+        Ok(())
+    }
+
+    /// Writes the standard deviations of the dynamics factors' poles and zeros, one
+    /// entry per factor of `dynamics` in its order. An error names a count that does
+    /// not match or a standard deviation that is not finite and non-negative; the file
+    /// is unchanged then.
+    pub fn set_factor_uncertainty(&mut self, factors: Vec<FactorStd>) -> Result<(), RivError> {
+        let mut next = self.clone();
+        next.dynamics_std = factors;
         next.check_uncertainty()?;
         *self = next;
         Ok(())
@@ -673,6 +736,54 @@ mod tests {
         assert!(back.provenance.links[0].details.is_none());
         assert_eq!(back.provenance.links[0].iterations, 3);
         back.to_model().expect("an old file still opens");
+    }
+
+    /// The dynamics factors' standard deviations: one entry per factor, checked, kept
+    /// through the file.
+    #[test]
+    fn factor_standard_deviations_are_checked_and_kept() {
+        let mut m = AdditiveModel::new(2, 2, Domain::Continuous).unwrap();
+        m.push_mode(10.0, 0.1, false).unwrap();
+        m.push_dynamics(crate::model::DynamicsFactor::first_order(
+            crate::model::FactorTarget::Input(1),
+            800.0,
+        ))
+        .unwrap();
+        let mut f = ModelFile::from_model(&m, None, None, Provenance::default()).unwrap();
+        let lag = FactorStd {
+            poles: vec![RootStd {
+                f_hz: 800.0,
+                f_hz_std: 0.003,
+                zeta: 1.0,
+                zeta_std: 0.0,
+            }],
+            zeros: vec![],
+        };
+        let e = f
+            .set_factor_uncertainty(vec![lag.clone(), lag.clone()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("dynamics_std lists 2 factors but dynamics holds 1"),
+            "{e}"
+        );
+        let mut bad = lag.clone();
+        bad.poles[0].f_hz_std = -1.0;
+        let e = f.set_factor_uncertainty(vec![bad]).unwrap_err().to_string();
+        assert!(e.contains("dynamics_std[0].poles[0].f_hz_std is -1"), "{e}");
+        assert!(
+            f.dynamics_std.is_empty(),
+            "the file is unchanged after an error"
+        );
+        f.set_factor_uncertainty(vec![lag.clone()]).unwrap();
+        let text = serde_json::to_string(&f).unwrap();
+        let back: ModelFile = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.dynamics_std, vec![lag]);
+        back.to_model().expect("reads back");
+        // a file without them reads as before
+        let plain = ModelFile::from_model(&m, None, None, Provenance::default()).unwrap();
+        let text = serde_json::to_string(&plain).unwrap();
+        assert!(!text.contains("dynamics_std"));
     }
 
     fn two_mode_file(fit_delay: bool) -> ModelFile {

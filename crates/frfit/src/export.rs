@@ -125,6 +125,10 @@ pub struct StateSpaceExport {
     /// Standard deviation of the fitted delay, seconds, when known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub delay_s_std: Option<f64>,
+    /// Per factor of `factors.dynamics`, in its order, its poles and zeros with their
+    /// standard deviations, when the model file holds them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dynamics_std: Vec<additive_riv::FactorStd>,
 }
 
 /// A flexible mode of the exported model and its standard deviations.
@@ -238,6 +242,7 @@ pub fn export_state_space(
         rank_tol,
         modes: Vec::new(),
         delay_s_std: None,
+        dynamics_std: Vec::new(),
     })
 }
 

@@ -15,8 +15,8 @@ use std::path::PathBuf;
 pub struct Args {
     /// The model (JSON written by `frfit fit` or `frfit diagnose`).
     pub model: PathBuf,
-    /// Output: `.json` (frfit-state-space, every factor, the modes with their standard
-    /// deviations) or `.mat` (MATLAB level 5: A, B, C, D, delay_s, derivative_order;
+    /// Output: `.json` (frfit-state-space, every factor, the modes and the dynamics
+    /// factors' poles and zeros with their standard deviations) or `.mat` (MATLAB level 5: A, B, C, D, delay_s, derivative_order;
     /// Ad, Bd, Cd, Dd, Ts with a discrete form; f_hz, zeta, and f_hz_std, zeta_std,
     /// delay_s_std when the model holds them).
     #[arg(long, value_name = "SS.json|SS.mat")]
@@ -57,6 +57,11 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         })
         .collect();
     e.delay_s_std = file.delay_s_std;
+    // ... and the dynamics factors' poles and zeros (the JSON form; the .mat holds the
+    // modes' and the delay's)
+    if file.dynamics_std.len() == e.factors.dynamics.len() {
+        e.dynamics_std = file.dynamics_std.clone();
+    }
     let ext = args
         .out
         .extension()

@@ -126,6 +126,29 @@ impl PipelineOutput {
                 None
             };
             file.set_uncertainty(&modes, delay_std)?;
+            // the dynamics factors' poles and zeros, when the covariance holds every
+            // factor of the file (both in the model's order)
+            if !u.factors.is_empty() && u.factors.len() == file.dynamics.len() {
+                let roots = |r: &[crate::summary::ModeUncertaintySummary]| {
+                    r.iter()
+                        .map(|m| additive_riv::RootStd {
+                            f_hz: m.f_hz,
+                            f_hz_std: m.f_hz_std,
+                            zeta: m.zeta,
+                            zeta_std: m.zeta_std,
+                        })
+                        .collect()
+                };
+                let factors = u
+                    .factors
+                    .iter()
+                    .map(|f| additive_riv::FactorStd {
+                        poles: roots(&f.poles),
+                        zeros: roots(&f.zeros),
+                    })
+                    .collect();
+                file.set_factor_uncertainty(factors)?;
+            }
         }
         Ok(file)
     }
