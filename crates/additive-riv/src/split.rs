@@ -132,6 +132,10 @@ pub struct PairSplit {
     pub into: [(f64, f64); 2],
     /// F statistic of the second mode's parameters.
     pub f_stat: f64,
+    /// Weighted cost `sum w |E|^2` before and after the split (the pair settled, before
+    /// the final refinement).
+    #[serde(default)]
+    pub cost: (f64, f64),
 }
 
 /// A mode added beyond a band edge.
@@ -148,6 +152,10 @@ pub struct OutOfBandMode {
     /// Cost of a constant feedthrough in its place (the alternative it beat), relative
     /// to its own cost; `None` when the model has a feedthrough already.
     pub feedthrough_cost_ratio: Option<f64>,
+    /// Weighted cost `sum w |E|^2` before and after the addition (the mode settled,
+    /// before the final refinement).
+    #[serde(default)]
+    pub cost: (f64, f64),
 }
 
 /// What [`split_close_pairs`] and [`add_out_of_band_mode`] did.
@@ -431,7 +439,7 @@ pub fn split_close_pairs(
                 ));
             }
         }
-        let Some((t, _, fstat)) = best else {
+        let Some((t, vt, fstat)) = best else {
             continue;
         };
         // the pair: the two modes of the new model nearest the old one
@@ -447,6 +455,7 @@ pub fn split_close_pairs(
                 from_hz: f,
                 into: pair,
                 f_stat: fstat,
+                cost: (v0, vt),
             });
         }
         tried.extend(near.iter().take(2).map(|p| p.0));
@@ -587,6 +596,7 @@ pub fn add_out_of_band_mode(
                 edge: edge.to_string(),
                 f_stat: fstat,
                 feedthrough_cost_ratio: feed.map(|vf| vf / vt),
+                cost: (v0, vt),
             });
             cur = t;
         }

@@ -1241,17 +1241,26 @@ fn markdown(
             .initial
             .repairs
             .iter()
-            .map(|r| match &r.repair {
-                Repair::OutOfBandMode {
-                    f_hz, zeta, edge, ..
-                } => format!(
-                    "`out_of_band_mode` at {f_hz:.2} Hz (zeta {zeta:.4}, beyond the {edge} edge; F = {:.1})",
-                    r.f_statistic
-                ),
-                Repair::ClosePair { from_hz, .. } => format!(
-                    "`close_pair`: the mode at {from_hz:.2} Hz split in two (F = {:.1})",
-                    r.f_statistic
-                ),
+            .map(|r| {
+                let cost = r.cost.map_or(String::new(), |c| {
+                    format!(
+                        ", weighted cost {} -> {}",
+                        fmt_num(c.before),
+                        fmt_num(c.after)
+                    )
+                });
+                match &r.repair {
+                    Repair::OutOfBandMode {
+                        f_hz, zeta, edge, ..
+                    } => format!(
+                        "`out_of_band_mode` at {f_hz:.2} Hz (zeta {zeta:.4}, beyond the {edge} edge; F = {:.1}{cost})",
+                        r.f_statistic
+                    ),
+                    Repair::ClosePair { from_hz, modes } => format!(
+                        "`close_pair`: the mode at {from_hz:.2} Hz split in two, {:.2} and {:.2} Hz (F = {:.1}{cost})",
+                        modes[0].f_hz, modes[1].f_hz, r.f_statistic
+                    ),
+                }
             })
             .collect();
         let _ = writeln!(

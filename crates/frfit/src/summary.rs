@@ -165,6 +165,20 @@ pub struct RepairSummary {
     pub repair: Repair,
     /// F statistic of the added mode's parameters.
     pub f_statistic: f64,
+    /// The fit's weighted cost `sum w |E|^2` before and after the repair (the added mode
+    /// settled, before the first fit's final refinement); absent in files written
+    /// before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost: Option<CostChange>,
+}
+
+/// A weighted cost before and after a change of the model.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CostChange {
+    /// Before the change.
+    pub before: f64,
+    /// After it.
+    pub after: f64,
 }
 
 /// One step of the diagnosis loop: a candidate effect, tested.
@@ -544,9 +558,14 @@ mod tests {
                 ],
             },
             f_statistic: 80.0,
+            cost: Some(CostChange {
+                before: 2.0e5,
+                after: 4.1e3,
+            }),
         };
         let v = serde_json::to_value(&r).unwrap();
         assert_eq!(v["effect"], "close_pair");
+        assert_eq!(v["cost"]["after"], 4.1e3);
         assert_eq!(v["params"]["modes"][1]["f_hz"], 637.2);
         assert_eq!(serde_json::from_value::<RepairSummary>(v).unwrap(), r);
     }

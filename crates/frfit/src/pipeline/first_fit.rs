@@ -528,14 +528,14 @@ fn repair_fit(
         .push_str(" -> repairs (out-of-band mode, close pairs)");
     for m in &report.out_of_band {
         out.messages.push(format!(
-            "added an out-of-band mode at {:.2} Hz (zeta {:.4}, beyond the {} band edge; F = {:.1})",
-            m.f_hz, m.zeta, m.edge, m.f_stat
+            "added an out-of-band mode at {:.2} Hz (zeta {:.4}, beyond the {} band edge; F = {:.1}; weighted cost {:.4e} -> {:.4e})",
+            m.f_hz, m.zeta, m.edge, m.f_stat, m.cost.0, m.cost.1
         ));
     }
     for s in &report.splits {
         out.messages.push(format!(
-            "split the mode at {:.2} Hz into a close pair at {:.2} and {:.2} Hz (F = {:.1})",
-            s.from_hz, s.into[0].0, s.into[1].0, s.f_stat
+            "split the mode at {:.2} Hz into a close pair at {:.2} and {:.2} Hz (F = {:.1}; weighted cost {:.4e} -> {:.4e})",
+            s.from_hz, s.into[0].0, s.into[1].0, s.f_stat, s.cost.0, s.cost.1
         ));
     }
     Ok((out, report))

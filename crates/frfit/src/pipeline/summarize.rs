@@ -533,6 +533,12 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
     }
 }
 
+/// A repair's recorded cost before and after (`None` for one read from a report
+/// written before it was recorded: both zero).
+fn cost_change((before, after): (f64, f64)) -> Option<crate::summary::CostChange> {
+    (before > 0.0).then_some(crate::summary::CostChange { before, after })
+}
+
 /// The first fit's repairs ([`additive_riv::split`]) as summary entries.
 fn repair_summaries(r: Option<&additive_riv::split::RepairReport>) -> Vec<RepairSummary> {
     let Some(r) = r else {
@@ -549,6 +555,7 @@ fn repair_summaries(r: Option<&additive_riv::split::RepairReport>) -> Vec<Repair
                 feedthrough_cost_ratio: m.feedthrough_cost_ratio,
             },
             f_statistic: m.f_stat,
+            cost: cost_change(m.cost),
         })
         .collect();
     out.extend(r.splits.iter().map(|s| RepairSummary {
@@ -557,6 +564,7 @@ fn repair_summaries(r: Option<&additive_riv::split::RepairReport>) -> Vec<Repair
             modes: s.into.map(|(f_hz, zeta)| ModeParams { f_hz, zeta }),
         },
         f_statistic: s.f_stat,
+        cost: cost_change(s.cost),
     }));
     out
 }
