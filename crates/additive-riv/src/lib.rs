@@ -49,7 +49,7 @@ pub mod structure;
 
 pub use fitter::{AdditiveFitter, DelayChoice, FitterConfig, FitterReport, Hold, ModeSelection};
 pub use init::{initial_model, InitConfig, RigidBody};
-pub use model_json::{FactorStd, ModeStd, ModelFile, Provenance, RootStd};
+pub use model_json::{FactorStd, ModeStd, ModelFile, Provenance};
 pub use numerators::fit_numerators;
 pub use problem::FitData;
 pub use riv::{AdditiveRiv, RivConfig};

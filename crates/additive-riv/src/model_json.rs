@@ -16,6 +16,7 @@
 use crate::model::{Submodel, SubmodelKind};
 use crate::{AdditiveModel, Domain, KnownFactor, RivError};
 use faer::Mat;
+use frf_data::uncertainty::PoleUncertainty;
 use frf_data::ModelStructure;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -68,29 +69,15 @@ pub struct ModeStd {
     pub zeta_std: f64,
 }
 
-/// A root (pole or zero) of a dynamics factor with the standard deviations of its
-/// frequency and damping (a real root has damping 1).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct RootStd {
-    /// Frequency `|s| / 2 pi`, Hz.
-    pub f_hz: f64,
-    /// Its standard deviation, Hz.
-    pub f_hz_std: f64,
-    /// Relative damping `-Re s / |s|`.
-    pub zeta: f64,
-    /// Its standard deviation.
-    pub zeta_std: f64,
-}
-
 /// The standard deviations of one dynamics factor's poles and zeros (the upper root of
 /// a complex pair), from a refiner's covariance.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct FactorStd {
     /// The roots of its denominator.
-    pub poles: Vec<RootStd>,
+    pub poles: Vec<PoleUncertainty>,
     /// The roots of its numerator.
     #[serde(default)]
-    pub zeros: Vec<RootStd>,
+    pub zeros: Vec<PoleUncertainty>,
 }
 
 /// The rigid-body part `sum_k R_k / s^k`.
@@ -751,7 +738,7 @@ mod tests {
         .unwrap();
         let mut f = ModelFile::from_model(&m, None, None, Provenance::default()).unwrap();
         let lag = FactorStd {
-            poles: vec![RootStd {
+            poles: vec![PoleUncertainty {
                 f_hz: 800.0,
                 f_hz_std: 0.003,
                 zeta: 1.0,

@@ -31,6 +31,7 @@ pub mod shared_data;
 pub mod stats;
 pub mod truth;
 pub mod twins;
+pub mod uncertainty;
 pub mod view;
 pub mod weighting;
 

@@ -354,25 +354,16 @@ pub struct DistortionSummary {
     pub loop_against_floor: bool,
 }
 
-/// A mode with the standard deviations of its frequency and damping.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct ModeUncertaintySummary {
-    /// Natural frequency, Hz.
-    pub f_hz: f64,
-    /// Its standard deviation, Hz.
-    pub f_hz_std: f64,
-    /// Relative damping.
-    pub zeta: f64,
-    /// Its standard deviation.
-    pub zeta_std: f64,
-}
+/// A mode with the standard deviations of its frequency and damping (the refiner's
+/// own form).
+pub use frf_data::uncertainty::PoleUncertainty as ModeUncertaintySummary;
 
 /// A dynamics factor's poles and zeros with standard deviations (a real root has
 /// damping 1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FactorUncertaintySummary {
     /// What it multiplies: `input j` or `output i` (1-based, as the steps name them) or
-    /// `all`.
+    /// `all entries`, as `final_model.dynamics` names it.
     pub target: String,
     /// The roots of its denominator.
     pub poles: Vec<ModeUncertaintySummary>,

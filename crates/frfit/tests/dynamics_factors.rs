@@ -60,7 +60,7 @@ fn a_common_amplifier_lag_is_one_input_dynamics_on_all_inputs() {
     // lag's corner (one seed: within 3 sigma)
     let u = out.summary.uncertainty.as_ref().expect("an uncertainty");
     assert_eq!(u.factors.len(), 1, "{:?}", u.factors);
-    assert_eq!(u.factors[0].target, "all");
+    assert_eq!(u.factors[0].target, "all entries");
     let corner = u.factors[0].poles[0];
     println!(
         "lag corner {:.3} Hz +- {:.3} Hz (1 sigma), made at {f_c}",

@@ -58,17 +58,7 @@ fn nonlinear_start(model: &FrfModel, lay: &Layout) -> Vec<f64> {
 }
 
 /// A mode's natural frequency and damping with their standard deviations.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct ModeUncertainty {
-    /// Natural frequency `|p| / 2 pi`, Hz.
-    pub f_hz: f64,
-    /// Its standard deviation, Hz.
-    pub f_hz_std: f64,
-    /// Relative damping `-Re p / |p|`.
-    pub zeta: f64,
-    /// Its standard deviation.
-    pub zeta_std: f64,
-}
+pub use frf_data::uncertainty::PoleUncertainty as ModeUncertainty;
 
 /// A dynamics factor's poles and zeros (the upper one of a complex pair; a real root
 /// has damping 1) with the standard deviations of their frequency and damping, from
@@ -163,48 +153,28 @@ impl Information {
     /// The report of the information at the estimate: the modes' and the delay's
     /// standard deviations, the cost test, no iterations.
     fn report(&self) -> MlReport {
-        let Information {
-            prob,
-            theta,
-            ev,
-            cov,
-            cond,
-            cost,
-            dof,
-            ratio,
-            expected,
-            p_value,
-            scale,
-            measured,
-            weighting_name,
-            n_params,
-            n_observations,
-        } = self;
-        let (cond, cost, dof, ratio, expected, p_value, scale, measured) = (
-            *cond, *cost, *dof, *ratio, *expected, *p_value, *scale, *measured,
-        );
+        let (prob, theta, scale) = (&self.prob, &self.theta, self.scale);
         let lay = &prob.lay;
         let n_nl = lay.n_nl();
-        let c = |a: usize, b: usize| cov[b * n_nl + a] * scale;
+        let c = |a: usize, b: usize| self.cov[b * n_nl + a] * scale;
         let modes = mode_uncertainties(theta, lay.n_pairs, &c);
-        let first_factor = 2 * lay.n_pairs + lay.n_real + usize::from(lay.delay);
         let factors = factor_uncertainties(
-            &prob.model(theta, &ev.coef).factors.dynamics,
-            first_factor,
+            &prob.model(theta, &self.ev.coef).factors.dynamics,
+            lay.dynamics_index(),
             &c,
         );
         let mut messages = Vec::new();
         let (delay_s, delay_s_std) = match lay.delay_index() {
             Some(i) => {
                 let fisher = c(i, i).max(0.0).sqrt();
-                let (std, _) = delay_std(prob, theta, i, (cost, scale), fisher, &mut messages);
+                let (std, _) = delay_std(prob, theta, i, (self.cost, scale), fisher, &mut messages);
                 (Some(theta[i]), Some(std))
             }
             None => (None, None),
         };
         MlReport {
-            weighting: weighting_name.clone(),
-            noise: if measured {
+            weighting: self.weighting_name.clone(),
+            noise: if self.measured {
                 "measured variance".into()
             } else {
                 "estimated from the residual".into()
@@ -215,10 +185,10 @@ impl Information {
                 "complex".into()
             },
             n_nonlinear: n_nl,
-            n_params: *n_params,
-            n_observations: *n_observations,
+            n_params: self.n_params,
+            n_observations: self.n_observations,
             iterations: 0,
-            cost_history: vec![cost],
+            cost_history: vec![self.cost],
             converged: false,
             convergence: format!(
                 "not iterated: the information at the given estimate{}",
@@ -228,13 +198,13 @@ impl Information {
                     format!(" ({})", messages.join("; "))
                 }
             ),
-            cost,
-            dof,
-            cost_ratio: ratio,
-            expected_ratio: expected,
-            p_value,
+            cost: self.cost,
+            dof: self.dof,
+            cost_ratio: self.ratio,
+            expected_ratio: self.expected,
+            p_value: self.p_value,
             covariance_scale: scale,
-            information_condition: cond,
+            information_condition: self.cond,
             modes,
             delay_s,
             delay_s_std,
@@ -836,11 +806,7 @@ impl MlRefine {
         }
         let c = |a: usize, b: usize| cov[b * n_nl + a] * scale;
         let modes = mode_uncertainties(&out.theta, np, &c);
-        let factors = factor_uncertainties(
-            &fitted.factors.dynamics,
-            2 * np + lay.n_real + usize::from(lay.delay),
-            &c,
-        );
+        let factors = factor_uncertainties(&fitted.factors.dynamics, lay.dynamics_index(), &c);
         let (delay_s, delay_s_std) = match lay.delay_index() {
             Some(i) => {
                 let fisher = c(i, i).max(0.0).sqrt();
@@ -1240,8 +1206,8 @@ fn mode_uncertainties(
 }
 
 /// The poles and zeros of `dynamics` (the fitted factors, whose coefficients are the
-/// nonlinear parameters from index `first` on, each factor's denominator then
-/// numerator) with their standard deviations, `c` the scaled covariance of the
+/// nonlinear parameters from index `first` on, [`Layout::dynamics_index`], each
+/// factor's denominator then numerator) with their standard deviations, `c` the scaled covariance of the
 /// nonlinear parameters. A root `x` of `1 + c_1 x + ... + c_n x^n` moves by
 /// `dx/dc_i = -x^i / P'(x)`; the root in rad/s is `sigma x`, and its frequency and
 /// damping follow as a mode's ([`mode_uncertainties`]).

@@ -122,6 +122,11 @@ impl Layout {
     pub fn delay_index(&self) -> Option<usize> {
         self.delay.then_some(2 * self.n_pairs + self.n_real)
     }
+    /// Index of the first dynamics coefficient in the nonlinear vector (each factor's
+    /// denominator then numerator follow, in the factors' order).
+    pub fn dynamics_index(&self) -> usize {
+        2 * self.n_pairs + self.n_real + usize::from(self.delay)
+    }
 }
 
 /// The groups of entries with proportional weights ([`Shared::new`]) for a problem whose
@@ -294,7 +299,7 @@ impl Problem {
         if let Some(i) = lay.delay_index() {
             f.delay_s = theta[i];
         }
-        let mut off = 2 * lay.n_pairs + lay.n_real + usize::from(lay.delay);
+        let mut off = lay.dynamics_index();
         for d in &mut f.dynamics {
             for v in d.den.iter_mut().chain(d.num.iter_mut()) {
                 *v = theta[off];

@@ -106,11 +106,7 @@ pub fn final_model_summary(fit: &Fit<AdditiveModel>) -> FinalModelSummary {
             .dynamics
             .iter()
             .map(|d| {
-                let target = match d.target {
-                    FactorTarget::Input(j) => format!("input {}", j + 1),
-                    FactorTarget::Output(i) => format!("output {}", i + 1),
-                    FactorTarget::All => "all entries".into(),
-                };
+                let target = factor_target_name(d.target);
                 let roots = |r: Vec<realize::C64>| -> String {
                     r.iter()
                         .filter(|p| p.im >= 0.0)
@@ -364,24 +360,14 @@ pub const ML_METHOD: &str = "ml";
 pub const INFORMATION_METHOD: &str = "information";
 
 fn uncertainty_summary(method: &str, r: &ml_refine::MlReport) -> UncertaintySummary {
-    let summary_of = |m: &ml_refine::ModeUncertainty| ModeUncertaintySummary {
-        f_hz: m.f_hz,
-        f_hz_std: m.f_hz_std,
-        zeta: m.zeta,
-        zeta_std: m.zeta_std,
-    };
-    let mut modes: Vec<ModeUncertaintySummary> = r.modes.iter().map(summary_of).collect();
+    let mut modes: Vec<ModeUncertaintySummary> = r.modes.clone();
     let factors = r
         .factors
         .iter()
         .map(|f| crate::summary::FactorUncertaintySummary {
-            target: match f.target {
-                realize::FactorTarget::Input(j) => format!("input {}", j + 1),
-                realize::FactorTarget::Output(i) => format!("output {}", i + 1),
-                realize::FactorTarget::All => "all".into(),
-            },
-            poles: f.poles.iter().map(summary_of).collect(),
-            zeros: f.zeros.iter().map(summary_of).collect(),
+            target: factor_target_name(f.target),
+            poles: f.poles.clone(),
+            zeros: f.zeros.clone(),
         })
         .collect();
     modes.sort_by(|a, b| a.f_hz.total_cmp(&b.f_hz));
@@ -537,6 +523,16 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
 /// written before it was recorded: both zero).
 fn cost_change((before, after): (f64, f64)) -> Option<crate::summary::CostChange> {
     (before > 0.0).then_some(crate::summary::CostChange { before, after })
+}
+
+/// What a dynamics factor multiplies, in the summary's words: `input J`, `output I`
+/// (1-based, as the steps name them) or `all entries`.
+fn factor_target_name(target: FactorTarget) -> String {
+    match target {
+        FactorTarget::Input(j) => format!("input {}", j + 1),
+        FactorTarget::Output(i) => format!("output {}", i + 1),
+        FactorTarget::All => "all entries".into(),
+    }
 }
 
 /// The first fit's repairs ([`additive_riv::split`]) as summary entries.

@@ -129,22 +129,12 @@ impl PipelineOutput {
             // the dynamics factors' poles and zeros, when the covariance holds every
             // factor of the file (both in the model's order)
             if !u.factors.is_empty() && u.factors.len() == file.dynamics.len() {
-                let roots = |r: &[crate::summary::ModeUncertaintySummary]| {
-                    r.iter()
-                        .map(|m| additive_riv::RootStd {
-                            f_hz: m.f_hz,
-                            f_hz_std: m.f_hz_std,
-                            zeta: m.zeta,
-                            zeta_std: m.zeta_std,
-                        })
-                        .collect()
-                };
                 let factors = u
                     .factors
                     .iter()
                     .map(|f| additive_riv::FactorStd {
-                        poles: roots(&f.poles),
-                        zeros: roots(&f.zeros),
+                        poles: f.poles.clone(),
+                        zeros: f.zeros.clone(),
                     })
                     .collect();
                 file.set_factor_uncertainty(factors)?;
@@ -382,40 +372,38 @@ pub fn run(
     });
     // without the ML link's covariance, one information matrix at the final model gives
     // both the standard deviations and the band
-    let (information, band_std) = match (&ml_link, &band_entries) {
-        (Some(_), _) => (None, None),
-        (None, Some(entries)) => {
-            match information_uncertainty_and_response_std(&ctx, &fit.model, entries) {
-                Ok((u, std)) => (Some(Ok(u)), Some(Ok(std))),
-                Err(why) => (Some(Err(why)), None),
+    let mut band: Option<Result<Vec<f64>, String>> = None;
+    let uncertainty = match ml_link {
+        Some(u) => Some(u),
+        None => {
+            let information = match &band_entries {
+                Some(entries) => information_uncertainty_and_response_std(
+                    &ctx, &fit.model, entries,
+                )
+                .map(|(u, std)| {
+                    band = Some(Ok(std));
+                    u
+                }),
+                None => information_uncertainty(&ctx, &fit.model),
+            };
+            match information {
+                Ok(u) => Some(u),
+                Err(why) => {
+                    fit.messages
+                        .push(format!("no standard deviations for the final model: {why}"));
+                    None
+                }
             }
         }
-        (None, None) => (Some(information_uncertainty(&ctx, &fit.model)), None),
-    };
-    let uncertainty = match (ml_link, information) {
-        (Some(u), _) => Some(u),
-        (None, Some(Ok(u))) => Some(u),
-        (None, Some(Err(why))) => {
-            fit.messages
-                .push(format!("no standard deviations for the final model: {why}"));
-            None
-        }
-        (None, None) => None,
     };
     timings.stage("uncertainty", t);
-    // the response's standard deviation for the report's plots (only when it is
-    // written)
-    let band_std = match (band_std, &band_entries) {
-        (Some(s), _) => Some(s),
-        (None, Some(entries)) if uncertainty.is_some() => {
-            let t = Instant::now();
-            let s = response_std(&ctx, &fit.model, entries);
-            timings.stage("response uncertainty", t);
-            Some(s)
-        }
-        _ => None,
-    };
-    let final_response_std = match band_std {
+    // the band beside the ML link's covariance (only when the report is written)
+    if let (None, Some(entries), true) = (&band, &band_entries, uncertainty.is_some()) {
+        let t = Instant::now();
+        band = Some(response_std(&ctx, &fit.model, entries));
+        timings.stage("response uncertainty", t);
+    }
+    let final_response_std = match band {
         Some(Ok(s)) => Some(s),
         Some(Err(why)) => {
             fit.messages
