@@ -37,9 +37,12 @@ fn assert_near_truth(out: &PipelineOutput, clean: &Frf) {
 /// A suspension at 4 Hz (damping 0.05; the plate's rigid body on springs) and an 18th
 /// mode at 700 Hz that the nominal mode count (17) leaves out: the loop names the
 /// stiffness, and the missed mode is held by the final model (added by the loop or
-/// picked by the first fit's repairs). The first fit, at the noise level, holds the
-/// suspension as a 4 Hz mode beside a free body that carries nothing: the suspended-body
-/// reading replaces both by the suspension.
+/// picked at once). The first fit (17 CMIF peaks, the suspension among them, modes
+/// declared: no mode added in it) lacks members of close pairs and modes the peaks left
+/// out (measured: 391.9, 746.8, 1657.3 and 1881.2 Hz): each is a `missed_mode` step.
+/// Once at the noise level, the model holds the suspension as a 4 Hz mode beside a free
+/// body that carries nothing: the suspended-body reading replaces both by the
+/// suspension.
 #[test]
 fn a_suspension_with_a_missed_mode() {
     let (f_s, zeta_s) = (4.0, 0.05);
@@ -75,6 +78,80 @@ fn a_suspension_with_a_missed_mode() {
     assert!(in_loop || in_initial, "the mode at {f_m} Hz is found");
     assert!(out.summary.final_model.modes.iter().any(|m| near(m.f_hz)));
     for e in ["delay", "feedthrough", "input_dynamics", "output_dynamics"] {
+        assert!(common::accepted(&out, e).is_empty(), "no {e} step");
+    }
+    // no mode without a step
+    let added = common::accepted(&out, "missed_mode").len();
+    assert!(
+        out.summary.initial.modes.len() + added >= out.summary.final_model.modes.len(),
+        "{} modes in the first fit, {added} added by steps, {} in the final model",
+        out.summary.initial.modes.len(),
+        out.summary.final_model.modes.len()
+    );
+}
+
+/// A mode hidden beside another one, the two a close pair that the CMIF start merges
+/// (820 Hz, damping 0.006, 1.2 % above the plate's 810.2 Hz mode, another shape), with
+/// the mode count declared one short (`--modes 17` for 18): the mode the start lacks
+/// (measured: the CMIF picks both 810 and 820 Hz and merges the plate's pair at
+/// 746.8/762.9 Hz) is a `missed_mode` step of the loop, with its errors before and after
+/// and its check on held-out lines, not a repair inside the first fit; every mode of the
+/// final model beyond the first fit's came with a step, and the final model is at the
+/// truth.
+#[test]
+#[ignore = "slow tier (about 30 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
+fn a_hidden_mode_beside_a_close_pair_with_one_mode_short() {
+    let f_m = 820.0;
+    let hidden = FlexibleMode {
+        f_hz: f_m,
+        zeta: 0.006,
+        c: vec![-0.5, 0.8, 0.3, -0.7],
+        b: (0..13)
+            .map(|j| 0.3 * (1.3 * j as f64 + 1.1).cos())
+            .collect(),
+    };
+    let (data, clean, _) = common::simulate(&common::Sim {
+        extra_modes: vec![hidden],
+        ..sim()
+    });
+    let out = common::diagnose(&data, "mode beside a close pair", ModeSelection::Count(17));
+    assert_near_truth(&out, &clean);
+    assert_eq!(
+        out.summary.final_model.modes.len(),
+        18,
+        "the plate's 17 modes and the hidden one"
+    );
+    // the start (17 CMIF peaks) merges a close pair of the plate or the hidden one: the
+    // mode it lacks is a step
+    let added = common::accepted(&out, "missed_mode");
+    assert!(!added.is_empty(), "a missed_mode step");
+    for step in &added {
+        assert!(
+            step.after.residual_to_noise < step.before.residual_to_noise,
+            "the step lowers the error: {:?} -> {:?}",
+            step.before,
+            step.after
+        );
+        let h = step.held_out.expect("the step's held-out check");
+        assert!(h.after < h.before, "held out {} -> {}", h.before, h.after);
+    }
+    let near = |f: f64| (f / f_m - 1.0).abs() <= 0.005;
+    assert!(out.summary.final_model.modes.iter().any(|m| near(m.f_hz)));
+    // no mode without a step
+    assert!(
+        out.summary.initial.modes.len() + added.len() >= out.summary.final_model.modes.len(),
+        "{} modes in the first fit, {} added by steps, {} in the final model",
+        out.summary.initial.modes.len(),
+        added.len(),
+        out.summary.final_model.modes.len()
+    );
+    for e in [
+        "delay",
+        "feedthrough",
+        "input_dynamics",
+        "output_dynamics",
+        "stiffness",
+    ] {
         assert!(common::accepted(&out, e).is_empty(), "no {e} step");
     }
 }

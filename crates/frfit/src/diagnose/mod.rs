@@ -33,6 +33,7 @@ pub use candidate::{Candidate, DelayStart, FactorStart, Proposal};
 pub use restart::{
     better_first_fit, delay_restart, worth_a_delay_restart, DelayRestart, Restarted,
 };
+pub use trial::Trial;
 
 use crate::pipeline::{err, error_stats, FitContext, PipelineConfig};
 use crate::summary::{effect_name, ErrorStats, StepSummary};
@@ -44,7 +45,7 @@ use frf_data::{Fit, ModelStructure, ProgressSink};
 use rayon::prelude::*;
 use realize::ResponseGrid;
 use refit::model_cost;
-use trial::{Current, Trial};
+use trial::Current;
 use validation::analysis::{analyze_residual, Effect, ResidualAnalysis};
 
 /// What the loop produced.
@@ -85,6 +86,15 @@ struct State {
     /// The accepted step that made the delay a fitted parameter (its index in the steps)
     /// and the delay before it, seconds.
     delay_step: Option<(usize, f64)>,
+    /// Whether the loop tests the repairs' modes ([`trial::repaired_modes`]): when the
+    /// first fit did not make them ([`PipelineConfig::first_fit_adds_modes`]) and the
+    /// chain refines by Algorithm 1, whose structure they repair.
+    loop_repairs: bool,
+    /// Whether the repairs are still to be tested on the current model (once per model).
+    repairs_due: bool,
+    /// The repairs trial made on the first fit before the loop ([`first_repairs`]), for
+    /// round 1 (`Some(None)`: the repairs changed nothing).
+    repairs_made: Option<Option<Trial>>,
 }
 
 /// The factor steps of `accepted` (the model of the step at index `step`) from those of
@@ -133,10 +143,79 @@ impl State {
     }
 }
 
+/// The refits of the loop's candidates: Algorithm 1 to a coarse tolerance, quietly.
+fn candidate_riv(ctx: &FitContext, cfg: &PipelineConfig) -> RivConfig {
+    RivConfig {
+        param_tol: 1e-7,
+        max_iterations: 30,
+        progress: ProgressSink::none(),
+        ..ctx.riv_config(cfg)
+    }
+}
+
+/// Whether the loop tests the repairs' modes ([`trial::repaired_modes`]): when the first
+/// fit does not make them ([`PipelineConfig::first_fit_adds_modes`]) and the chain
+/// refines by Algorithm 1, whose structure they repair.
+fn loop_repairs(ctx: &FitContext, cfg: &PipelineConfig) -> bool {
+    let entries = frf_data::FrfDataset::ny(&ctx.band) * frf_data::FrfDataset::nu(&ctx.band);
+    !cfg.first_fit_adds_modes()
+        && crate::pipeline::default_chain(&cfg.init, &cfg.refine, entries).1 == "riv"
+}
+
+/// The repairs' modes tested on a first fit before the restarts of
+/// [`better_first_fit`] (which must then count the modes the first fit lost after
+/// them, [`FirstRepairs::modes`]), for the loop's first round.
+pub struct FirstRepairs {
+    /// The weighted cost of the model the trial was made on (the loop takes the trial
+    /// only when it starts from that model).
+    base_cost: f64,
+    /// The trial, when the repairs changed something.
+    trial: Option<Trial>,
+}
+
+impl FirstRepairs {
+    /// The modes of the repaired model when its trial passes its F test.
+    pub fn modes(&self) -> Option<usize> {
+        self.trial
+            .as_ref()
+            .filter(|t| t.passes())
+            .map(|t| t.model.modes().len())
+    }
+}
+
+/// The loop's repairs trial on the first fit `model` when the loop tests the repairs
+/// (the modes were declared), else `None`.
+pub fn first_repairs(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    model: &AdditiveModel,
+) -> Option<FirstRepairs> {
+    if !loop_repairs(ctx, cfg) {
+        return None;
+    }
+    let riv = candidate_riv(ctx, cfg);
+    let fd = &ctx.fit_data;
+    let stats = ResidualStats::new(model, fd);
+    let cost = model_cost(model, fd);
+    let current = Current {
+        model,
+        cost,
+        stats: &stats,
+    };
+    let merge = |m: AdditiveModel, c: f64, notes: &mut Vec<String>| {
+        accept::merge_twins(ctx, cfg, &riv, m, c, "after the repairs", notes).ok()
+    };
+    Some(FirstRepairs {
+        base_cost: cost,
+        trial: trial::repaired_modes(ctx, cfg, &riv, &current, &merge),
+    })
+}
+
 /// Runs the diagnosis loop from `first` (the first fit of `ctx.band`, whose response
 /// at the band's lines is `first_response`); `delay_restart` is the delay restart that
-/// [`better_first_fit`] made already, if any, and `sk_start` the common-denominator
-/// start it made, if any.
+/// [`better_first_fit`] made already, if any, `sk_start` the common-denominator
+/// start it made, if any, and `repairs` the repairs trial made on the first fit
+/// ([`first_repairs`]), if any.
 pub fn diagnose(
     ctx: &FitContext,
     cfg: &PipelineConfig,
@@ -144,16 +223,12 @@ pub fn diagnose(
     first_response: &ResponseGrid,
     delay_restart: Option<DelayRestart>,
     sk_start: Option<AdditiveModel>,
+    repairs: Option<FirstRepairs>,
 ) -> Result<Diagnosis, FrfitError> {
     let mut fit = first;
     let fd = &ctx.fit_data;
-    // candidate refits: Algorithm 1 to a coarse tolerance, quietly
-    let riv = RivConfig {
-        param_tol: 1e-7,
-        max_iterations: 30,
-        progress: ProgressSink::none(),
-        ..ctx.riv_config(cfg)
-    };
+    let riv = candidate_riv(ctx, cfg);
+    let loop_repairs = loop_repairs(ctx, cfg);
     let analysis = analyze_residual(
         &ctx.band,
         first_response,
@@ -175,7 +250,14 @@ pub fn diagnose(
         allowed_increase: 0.0,
         factor_steps: vec![None; fit.model.dynamics.len()],
         delay_step: None,
+        loop_repairs,
+        repairs_due: loop_repairs,
+        repairs_made: None,
     };
+    // the repairs trial made on this very model
+    st.repairs_made = repairs
+        .filter(|r| r.base_cost.to_bits() == st.cost.to_bits())
+        .map(|r| r.trial);
     let mut steps: Vec<StepSummary> = Vec::new();
     let mut step_responses = Vec::new();
     let mut stages: Vec<(String, f64)> = Vec::new();
@@ -282,6 +364,7 @@ pub fn diagnose(
         st.cost = cost;
         st.response = m.response_at(&ctx.omega);
         st.model = m;
+        st.repairs_due = st.loop_repairs;
         st.reanalyze(ctx)?;
         // a loop that reaches the noise level can leave the body's low mode beside an
         // empty free body
@@ -401,9 +484,36 @@ fn round(
         cost: st.cost,
         stats: &stats,
     };
+    let merge = |m: AdditiveModel, c: f64, notes: &mut Vec<String>| {
+        accept::merge_twins(ctx, cfg, riv, m, c, "after the repairs", notes).ok()
+    };
+    let repairs = std::mem::take(&mut st.repairs_due);
+    // the trial made before the loop stands for round 1's
+    let made = st.repairs_made.take();
+    let repairs_trial = || match &made {
+        Some(t) => t.clone(),
+        None => trial::repaired_modes(ctx, cfg, riv, &current, &merge),
+    };
     if proposals.is_empty() {
-        // nothing proposed while the residual is significant: the modes a common
-        // denominator sees that the model lacks
+        // nothing proposed while the residual is significant: modes without a peak of
+        // their own (a merged close pair, a mode beyond a band edge) ...
+        if repairs {
+            cfg.progress.step(
+                "diagnose",
+                st.n_tests + 1,
+                None,
+                None,
+                format!(
+                    "round {}: testing close pairs and modes beyond the band edges",
+                    st.n_accepted + 1
+                ),
+            );
+            st.n_tests += 1;
+            if let Some(t) = repairs_trial() {
+                return Some(vec![t]);
+            }
+        }
+        // ... and the modes a common denominator sees that the model lacks
         let sk = st
             .sk_start
             .get_or_insert_with(|| {
@@ -473,6 +583,9 @@ fn round(
     if let Some(r) = restart {
         first_wave.push(Job::DelayRestart(Box::new(r)));
     }
+    if repairs {
+        first_wave.push(Job::Repairs);
+    }
     first_wave.extend(others.into_iter().map(Job::Candidate));
     let run = |jobs: Vec<Job>| -> Vec<Trial> {
         jobs.into_par_iter()
@@ -484,6 +597,10 @@ fn round(
                 Job::DelayRestart(r) => {
                     progress("a delay with a refit from the start".into());
                     trial::restart_with_delay(ctx, cfg, &current, *r)
+                }
+                Job::Repairs => {
+                    progress("close pairs and modes beyond the band edges".into());
+                    repairs_trial()
                 }
                 Job::Candidate(p) => {
                     progress(effect_name(p.candidate.effect()).into());
@@ -627,6 +744,9 @@ enum Job {
     DelayRestart(Box<Option<DelayRestart>>),
     /// One proposed candidate ([`trial::refit_candidate`]).
     Candidate(Proposal),
+    /// The modes of the repairs: close pairs, a mode beyond a band edge
+    /// ([`trial::repaired_modes`]).
+    Repairs,
 }
 
 /// Records trial `tr` (accepted or not) as its steps, each with the response before it

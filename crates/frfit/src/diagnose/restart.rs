@@ -149,16 +149,30 @@ pub fn worth_a_delay_restart(ctx: &FitContext) -> Option<f64> {
 /// parameter, at least one, at `cfg.alpha`) passes. The delay restart (`speculative`
 /// when it was made beside the first fit and holds the first fit's delay) is returned
 /// for the loop's `delay` trial. `cmif_peaks`: the peaks the first fit's chain started
-/// from (0 when it did not start from the CMIF).
+/// from (0 when it did not start from the CMIF). `repaired_modes`: the modes the first
+/// fit holds after the repairs the loop will test on it (a first fit with declared modes
+/// makes none itself: close pairs merged by the start are then modes the loop adds, not
+/// modes the first fit lost; [`super::first_repairs`]).
 pub fn better_first_fit(
     ctx: &FitContext,
     cfg: &PipelineConfig,
     first: Fit<AdditiveModel>,
     speculative: Option<DelayRestart>,
     cmif_peaks: usize,
+    repaired_modes: Option<usize>,
 ) -> Result<Restarted, FrfitError> {
+    let unchanged = first.model.modes().len();
     let restarted = delay_restarted(ctx, cfg, first, speculative)?;
-    common_denominator_restart(ctx, cfg, restarted, cmif_peaks)
+    // the repairs were counted on the first fit: a delay restart that replaced it is
+    // counted as it is
+    let repaired = repaired_modes.filter(|_| restarted.summary.is_none());
+    let modes = restarted
+        .fit
+        .model
+        .modes()
+        .len()
+        .max(repaired.unwrap_or(unchanged));
+    common_denominator_restart(ctx, cfg, restarted, cmif_peaks, modes)
 }
 
 /// The first restart of [`better_first_fit`]: from the data's delay estimate.
@@ -285,7 +299,8 @@ const MIN_RECOVERED: usize = 2;
 ///
 /// - it runs when the first fit (after the delay restart) is more than
 ///   [`SECOND_START_RESIDUAL`] times the noise the loop judges by and holds at least
-///   [`MIN_RECOVERED`] modes fewer than the `cmif_peaks` its chain started from (its
+///   [`MIN_RECOVERED`] modes fewer than the `cmif_peaks` its chain started from
+///   (`modes`: its modes, or more after the repairs the loop tests on it; its
 ///   refinement lost modes the CMIF showed: with a residual far above the noise, the
 ///   structure adaptation's F tests drop true modes; a first fit that misplaced its
 ///   modes for an undeclared delay, or fits a distorted measurement with the modes
@@ -312,6 +327,7 @@ fn common_denominator_restart(
     cfg: &PipelineConfig,
     restarted: Restarted,
     cmif_peaks: usize,
+    modes: usize,
 ) -> Result<Restarted, FrfitError> {
     let entries = frf_data::FrfDataset::ny(&ctx.band) * frf_data::FrfDataset::nu(&ctx.band);
     let (init, refine) = crate::pipeline::default_chain(&cfg.init, &cfg.refine, entries);
@@ -319,7 +335,7 @@ fn common_denominator_restart(
         return Ok(restarted);
     }
     // the count of lost modes first: it needs no response
-    if cmif_peaks.saturating_sub(restarted.fit.model.modes().len()) < MIN_RECOVERED {
+    if cmif_peaks.saturating_sub(modes) < MIN_RECOVERED {
         return Ok(restarted);
     }
     let Restarted {

@@ -302,6 +302,93 @@ pub fn common_denominator_modes(
     })
 }
 
+/// The loop's twin merge of a model at a cost, its notes appended to the vector; `None`
+/// when it fails.
+pub type TwinMerge<'a> =
+    dyn Fn(AdditiveModel, f64, &mut Vec<String>) -> Option<(AdditiveModel, f64)> + Sync + 'a;
+
+/// Missed modes that show no residual peak of their own, found by the repairs of
+/// [`additive_riv::split`] on the current model: a mode beyond a band edge (a tail
+/// rising towards the edge) and close pairs that the start merged into one mode (the
+/// second mode of the pair under the first one's flank, its residual a wiggle around
+/// the merged mode that raises the local median the peak test compares with). The
+/// repairs settle their trials themselves (their own F and local tests); here the
+/// repaired model is refitted (Algorithm 1 at the candidates' tolerance), twins a split
+/// left are merged by `merge_twins` (the loop's twin merge: a merged pair's misfit can
+/// make a neighbouring mode split into twins first), and the modes it holds beyond the current
+/// model's ([`new_modes`]: the member of a split pair farther from the merged mode) are
+/// tested together as one candidate, each reported as its own `missed_mode` step. The
+/// first fit makes these repairs itself unless the modes were declared (`--modes N` or
+/// frequencies): a mode beyond the declared ones is then a discovery, tested here.
+/// `None` when the repairs change nothing, or the result lowers the cost by no mode.
+pub fn repaired_modes(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    riv: &RivConfig,
+    current: &Current,
+    merge_twins: &TwinMerge<'_>,
+) -> Option<Trial> {
+    use additive_riv::split::{add_out_of_band_mode, split_close_pairs, SplitConfig};
+    let fd = &ctx.fit_data;
+    let scfg = SplitConfig {
+        alpha: cfg.alpha,
+        min_f: cfg.min_f,
+        ..Default::default()
+    };
+    let (m, edge) = add_out_of_band_mode(current.model.clone(), fd, riv, &scfg).ok()?;
+    let (m, pairs) = split_close_pairs(m, fd, riv, &scfg).ok()?;
+    if edge.is_empty() && pairs.is_empty() {
+        return None;
+    }
+    let r = refit(m, fd, riv).ok()?;
+    let mut notes = Vec::new();
+    let (m, c) = merge_twins(r.model, r.cost, &mut notes)?;
+    let joint = new_modes(current.model, &m);
+    let added = m.n_params().saturating_sub(current.model.n_params());
+    if joint.is_empty() || added == 0 || c.is_nan() || c >= current.cost {
+        return None;
+    }
+    let (_, f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
+    let mut what: Vec<String> = edge
+        .out_of_band
+        .iter()
+        .map(|e| {
+            format!(
+                "a tail rising towards the {} band edge: a mode beyond it at {:.2} Hz (zeta {:.4}, F = {:.1}; weighted cost {:.4e} -> {:.4e})",
+                e.edge, e.f_hz, e.zeta, e.f_stat, e.cost.0, e.cost.1
+            )
+        })
+        .collect();
+    what.extend(pairs.splits.iter().map(|s| {
+        format!(
+            "the residual around the mode at {:.2} Hz far above the band's quiet lines and the typical mode's: a close pair merged into one mode, split into {:.2} and {:.2} Hz (F = {:.1}; weighted cost {:.4e} -> {:.4e})",
+            s.from_hz, s.into[0].0, s.into[1].0, s.f_stat, s.cost.0, s.cost.1
+        )
+    }));
+    what.extend(notes);
+    let list: Vec<String> = joint.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
+    Some(Trial {
+        params: FittedEffect::MissedMode {
+            f_hz: joint[0].0,
+            zeta: joint[0].1,
+        },
+        evidence: format!(
+            "modes without a residual peak of their own: {}; refitted, the model holds new modes at {}",
+            what.join("; "),
+            list.join(", ")
+        ),
+        model: m,
+        cost: c,
+        f,
+        f_crit,
+        added,
+        joint_modes: joint,
+        screened: None,
+        candidate: None,
+        held_out: None,
+    })
+}
+
 /// A delay large enough to matter also misplaces the modes fitted without it: the fit
 /// from the start (the run's estimator chain, `--init`/`--refine`, with the delay
 /// estimated from the data's phase slope and refined, [`super::restart::delay_restart`];

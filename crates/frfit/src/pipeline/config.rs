@@ -128,6 +128,17 @@ impl Default for PipelineConfig {
     }
 }
 
+impl PipelineConfig {
+    /// Whether the first fit adds modes beyond its start: the structure adaptation's
+    /// completion at significant residual peaks, and the repairs (a mode beyond a band
+    /// edge, close pairs split). Yes, unless a diagnosis was told the modes to expect
+    /// (`--modes N` or frequencies): a mode beyond them is then a discovery, a
+    /// `missed_mode` step of the loop.
+    pub fn first_fit_adds_modes(&self) -> bool {
+        !(self.diagnose && self.modes != ModeSelection::Auto)
+    }
+}
+
 pub(crate) fn err<E: std::fmt::Display>(what: &str) -> impl FnOnce(E) -> FrfitError + '_ {
     move |e| FrfitError::Fit {
         what: what.to_string(),

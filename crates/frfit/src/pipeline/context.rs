@@ -9,7 +9,7 @@ use crate::declared::{declared, Declared};
 use crate::FrfitError;
 use additive_riv::riv::RivConfig;
 use additive_riv::structure::AdaptConfig;
-use additive_riv::{AdditiveModel, DelayChoice, FitData, FitterConfig, Hold, ModeSelection};
+use additive_riv::{AdditiveModel, DelayChoice, FitData, FitterConfig, Hold};
 use frf_data::cmif::{cmif, Cmif};
 use frf_data::delay::{estimate_delay, DelayEstimate};
 use frf_data::{Frf, FrfDataset, ProgressSink, Weighting};
@@ -321,15 +321,9 @@ impl FitContext {
             adapt: Some(AdaptConfig {
                 min_f: cfg.min_f,
                 alpha: cfg.alpha,
-                // The first fit completes the modes at significant residual peaks, as
-                // `frfit fit` does, unless the user declared the modes to expect
-                // (`--modes N` or frequencies): then a mode beyond them is a discovery of
-                // the diagnosis loop, reported as a step.
-                max_new_per_round: if cfg.diagnose && cfg.modes != ModeSelection::Auto {
-                    0
-                } else {
-                    6
-                },
+                // the first fit completes the modes at significant residual peaks, as
+                // `frfit fit` does, unless a diagnosis was told the modes to expect
+                max_new_per_round: if cfg.first_fit_adds_modes() { 6 } else { 0 },
                 ..Default::default()
             }),
             progress: cfg.progress.clone(),

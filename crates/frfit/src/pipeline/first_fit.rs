@@ -481,7 +481,8 @@ pub fn chain_fit(
             .join(" -> "),
         messages,
     };
-    if refined_by_riv {
+    // with declared modes a diagnosis tests the repairs in its loop (they add modes)
+    if refined_by_riv && cfg.first_fit_adds_modes() {
         let repair;
         (fit, repair) = repair_fit(fit, &ctx.fit_data, &fc.riv)?;
         report.repair = Some(repair);

@@ -193,7 +193,15 @@ pub fn from_fit_if_worse(
         None,
         "starting again from `fit`'s model",
     );
-    let mut second = diagnose(ctx, cfg, reference.fit.clone(), &ref_response, None, None)?;
+    let mut second = diagnose(
+        ctx,
+        cfg,
+        reference.fit.clone(),
+        &ref_response,
+        None,
+        None,
+        None,
+    )?;
     second.fit.messages.insert(0, summary.reason.clone());
     let mut final_response = second.fit.model.response_at(&ctx.omega);
     let second_standing = Standing::of(ctx, &second.fit.model, &final_response);

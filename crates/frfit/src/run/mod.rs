@@ -25,7 +25,8 @@ pub use from_fit::{ends_worse, Standing};
 use from_fit::{from_fit_if_worse, FromFit, StartRecord};
 
 use crate::diagnose::{
-    better_first_fit, delay_restart, diagnose, worth_a_delay_restart, Diagnosis, Restarted,
+    better_first_fit, delay_restart, diagnose, first_repairs, worth_a_delay_restart, Diagnosis,
+    Restarted,
 };
 use crate::pipeline::{
     build_summary, cmif_once, distortion_summary, err, error_stats, first_fit,
@@ -242,6 +243,7 @@ pub fn run(
         });
     }
     // a restart that ends significantly better is a better first fit, not an effect
+    let mut repairs = None;
     let Restarted {
         fit,
         summary: restart,
@@ -249,7 +251,18 @@ pub fn run(
         sk_start,
     } = if cfg.diagnose && cfg.start_model.is_none() {
         let t = Instant::now();
-        let r = better_first_fit(&ctx, cfg, fit, speculative, fitter_report.cmif_peaks.len())?;
+        // with declared modes the repairs are the loop's first trial: made here, the
+        // restarts count the modes the first fit lost after them
+        repairs = first_repairs(&ctx, cfg, &fit.model);
+        let repaired = repairs.as_ref().and_then(|r| r.modes());
+        let r = better_first_fit(
+            &ctx,
+            cfg,
+            fit,
+            speculative,
+            fitter_report.cmif_peaks.len(),
+            repaired,
+        )?;
         timings.stage("restart", t);
         r
     } else {
@@ -275,7 +288,15 @@ pub fn run(
         stages,
     } = if cfg.diagnose {
         let t = Instant::now();
-        let d = diagnose(&ctx, cfg, fit, &initial_response, delay_restart, sk_start)?;
+        let d = diagnose(
+            &ctx,
+            cfg,
+            fit,
+            &initial_response,
+            delay_restart,
+            sk_start,
+            repairs,
+        )?;
         timings.stage("diagnose", t);
         let t = Instant::now();
         let start = StartRecord {
