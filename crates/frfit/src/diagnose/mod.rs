@@ -95,6 +95,40 @@ struct State {
     /// The repairs trial made on the first fit before the loop ([`first_repairs`]), for
     /// round 1 (`Some(None)`: the repairs changed nothing).
     repairs_made: Option<Option<Trial>>,
+    /// The modes accepted `missed_mode` steps added and the model still holds: (index
+    /// in the steps, frequency in Hz, damping).
+    mode_steps: Vec<(usize, f64, f64)>,
+}
+
+impl State {
+    /// Marks the `missed_mode` steps whose modes `before` held (the model before the step
+    /// at `step_index` and the modes it added) and `after` (the model once that step and
+    /// its pruning are done) no longer holds
+    /// ([`refit::unmatched_modes`]) as taken out by that step: a mode accepted for want
+    /// of the right effect (two added together, one of them the effect's), removed once
+    /// that effect was in. The nearest step mode within 3 % of each removed mode is the
+    /// one marked.
+    fn mark_removed_modes(
+        &mut self,
+        before: &[(f64, f64)],
+        after: &AdditiveModel,
+        step_index: usize,
+        steps: &mut [StepSummary],
+    ) {
+        for (f_gone, _) in refit::unmatched_modes(before, &refit::mode_list(after)) {
+            let nearest = self
+                .mode_steps
+                .iter()
+                .enumerate()
+                .filter(|(_, &(_, f, _))| (f / f_gone - 1.0).abs() < 0.03)
+                .min_by(|a, b| (a.1 .1 - f_gone).abs().total_cmp(&(b.1 .1 - f_gone).abs()))
+                .map(|(i, _)| i);
+            if let Some(i) = nearest {
+                let (j, _, _) = self.mode_steps.remove(i);
+                steps[j].superseded_by = Some(step_index + 1);
+            }
+        }
+    }
 }
 
 /// The factor steps of `accepted` (the model of the step at index `step`) from those of
@@ -253,6 +287,7 @@ pub fn diagnose(
         loop_repairs,
         repairs_due: loop_repairs,
         repairs_made: None,
+        mode_steps: Vec::new(),
     };
     // the repairs trial made on this very model
     st.repairs_made = repairs
@@ -299,6 +334,15 @@ pub fn diagnose(
         let Some((accepted, accepted_cost, step_index)) = accepted_model else {
             break;
         };
+        // the modes before the step and those the step added: the ones the step and its
+        // pruning take out are marked on the steps that added them
+        let mut modes_before = refit::mode_list(&st.model);
+        for (j, s) in steps.iter().enumerate().skip(step_index) {
+            if let (true, FittedEffect::MissedMode { f_hz, zeta }) = (s.accepted, &s.fitted) {
+                st.mode_steps.push((j, *f_hz, *zeta));
+                modes_before.push((*f_hz, *zeta));
+            }
+        }
         // the factors the accepted step took out of the model (redundant beside it, or
         // replaced by their twin) are marked on the steps that added them
         let (factor_steps, gone) =
@@ -361,6 +405,7 @@ pub fn diagnose(
                 }
             }
         }
+        st.mark_removed_modes(&modes_before, &m, step_index, &mut steps);
         st.cost = cost;
         st.response = m.response_at(&ctx.omega);
         st.model = m;

@@ -23,17 +23,24 @@ pub fn model_cost(model: &AdditiveModel, fd: &FitData) -> f64 {
 /// The modes of `after` that are not in `before`: each mode of `before` takes the
 /// nearest unclaimed mode of `after` within 3 %, the rest are new.
 pub fn new_modes(before: &AdditiveModel, after: &AdditiveModel) -> Vec<(f64, f64)> {
-    let mut left: Vec<(f64, f64)> = after.modes().iter().map(|m| (m.f_hz, m.zeta)).collect();
-    for old in before.modes() {
+    unmatched_modes(&mode_list(after), &mode_list(before))
+}
+
+/// (frequency in Hz, damping) of every mode of `model`.
+pub fn mode_list(model: &AdditiveModel) -> Vec<(f64, f64)> {
+    model.modes().iter().map(|m| (m.f_hz, m.zeta)).collect()
+}
+
+/// The modes of `of` that `against` does not hold: each mode of `against` claims the
+/// nearest unclaimed mode of `of` within 3 % in frequency; the unclaimed are returned.
+pub fn unmatched_modes(of: &[(f64, f64)], against: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut left = of.to_vec();
+    for &(f_old, _) in against {
         let nearest = left
             .iter()
             .enumerate()
-            .filter(|(_, (f, _))| (f / old.f_hz - 1.0).abs() < 0.03)
-            .min_by(|a, b| {
-                (a.1 .0 - old.f_hz)
-                    .abs()
-                    .total_cmp(&(b.1 .0 - old.f_hz).abs())
-            })
+            .filter(|(_, (f, _))| (f / f_old - 1.0).abs() < 0.03)
+            .min_by(|a, b| (a.1 .0 - f_old).abs().total_cmp(&(b.1 .0 - f_old).abs()))
             .map(|(i, _)| i);
         if let Some(i) = nearest {
             left.remove(i);
