@@ -257,11 +257,94 @@ fn column_major(m: &[Vec<f64>], rows: usize, cols: usize) -> (Vec<f64>, [usize; 
     (v, [rows, cols])
 }
 
+/// Columns of the `.mat` export's `dynamics_roots` table, in order.
+pub const DYNAMICS_ROOT_COLUMNS: [&str; 8] = [
+    "factor", "zero", "re", "im", "f_hz", "zeta", "f_hz_std", "zeta_std",
+];
+
+/// The dynamics factors of `e` as two real tables for the MAT-file (no factor: none):
+/// - `dynamics_target`, one row per factor: `[kind, index]` with kind 0 for every entry
+///   (index 0), 1 for an input column and 2 for an output row (index 1-based);
+/// - `dynamics_roots`, one row per root of each factor, columns
+///   [`DYNAMICS_ROOT_COLUMNS`]: the factor (1-based), 0 for a pole and 1 for a zero, the
+///   root in rad/s, its natural frequency and damping, and their standard deviations
+///   (NaN when the model file holds none, [`StateSpaceExport::dynamics_std`]).
+fn dynamics_tables(e: &StateSpaceExport) -> Vec<(String, Vec<f64>, [usize; 2])> {
+    use realize::FactorTarget;
+    let factors = &e.factors.dynamics;
+    if factors.is_empty() {
+        return Vec::new();
+    }
+    let mut target = Vec::new();
+    for f in factors {
+        let (kind, index) = match f.target {
+            FactorTarget::All => (0.0, 0.0),
+            FactorTarget::Input(j) => (1.0, (j + 1) as f64),
+            FactorTarget::Output(i) => (2.0, (i + 1) as f64),
+        };
+        target.push([kind, index]);
+    }
+    let mut rows: Vec<[f64; 8]> = Vec::new();
+    for (k, f) in factors.iter().enumerate() {
+        let std = e.dynamics_std.get(k);
+        for (zero, roots, stds) in [
+            (0.0, f.poles(), std.map(|s| &s.poles)),
+            (1.0, f.zeros(), std.map(|s| &s.zeros)),
+        ] {
+            for root in &roots {
+                let w = root.norm();
+                let (f_hz, zeta) = (w / std::f64::consts::TAU, -root.re / w);
+                // the standard deviations of the root with this frequency and damping
+                // (a conjugate pair shares one entry)
+                let u = stds.and_then(|v| {
+                    v.iter().min_by(|a, b| {
+                        let d = |u: &frf_data::uncertainty::PoleUncertainty| {
+                            (u.f_hz - f_hz).abs() + (u.zeta - zeta).abs() * f_hz
+                        };
+                        d(a).total_cmp(&d(b))
+                    })
+                });
+                rows.push([
+                    (k + 1) as f64,
+                    zero,
+                    root.re,
+                    root.im,
+                    f_hz,
+                    zeta,
+                    u.map_or(f64::NAN, |u| u.f_hz_std),
+                    u.map_or(f64::NAN, |u| u.zeta_std),
+                ]);
+            }
+        }
+    }
+    let column_major = |t: &[Vec<f64>]| -> Vec<f64> {
+        let cols = t.first().map_or(0, Vec::len);
+        (0..cols)
+            .flat_map(|c| t.iter().map(move |row| row[c]))
+            .collect()
+    };
+    let target: Vec<Vec<f64>> = target.iter().map(|r| r.to_vec()).collect();
+    let roots: Vec<Vec<f64>> = rows.iter().map(|r| r.to_vec()).collect();
+    vec![
+        (
+            "dynamics_target".into(),
+            column_major(&target),
+            [target.len(), 2],
+        ),
+        (
+            "dynamics_roots".into(),
+            column_major(&roots),
+            [roots.len(), DYNAMICS_ROOT_COLUMNS.len()],
+        ),
+    ]
+}
+
 /// The export as a level-5 MAT-file: `A, B, C, D`, `delay_s`, `derivative_order`, and
 /// `Ad, Bd, Cd, Dd, Ts` when a discrete equivalent is present, `X` for a crosstalk
-/// (MATLAB: `load M.mat; sys = ss(A, B, C, D, 'OutputDelay', delay_s)`). The dynamics
-/// factors, when present, are only in the JSON export (the MAT-file says so in
-/// `n_dynamics_factors`).
+/// (MATLAB: `load M.mat; sys = ss(A, B, C, D, 'OutputDelay', delay_s)`). The modes'
+/// `f_hz`, `zeta` (with `f_hz_std`, `zeta_std` when known) and the dynamics factors
+/// ([`dynamics_tables`]: `dynamics_target`, `dynamics_roots`) go beside them; the
+/// factors' coefficients are in the JSON export.
 pub fn mat_bytes(e: &StateSpaceExport) -> Vec<u8> {
     let (n, ny, nu) = (e.n_states, e.ny, e.nu);
     let mut store: Vec<(String, Vec<f64>, [usize; 2])> = Vec::new();
@@ -319,6 +402,7 @@ pub fn mat_bytes(e: &StateSpaceExport) -> Vec<u8> {
         vec![e.factors.dynamics.len() as f64],
         [1, 1],
     ));
+    store.extend(dynamics_tables(e));
     let vars: Vec<MatWrite<'_>> = store
         .iter()
         .map(|(name, v, dims)| MatWrite {
@@ -329,4 +413,91 @@ pub fn mat_bytes(e: &StateSpaceExport) -> Vec<u8> {
         })
         .collect();
     mat5_bytes(&vars)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frf_data::io::mat5::{parse_mat5, MatValue};
+    use frf_data::uncertainty::PoleUncertainty;
+    use realize::{FactorTarget, ModalModel};
+
+    fn pu(f_hz: f64, f_hz_std: f64, zeta: f64, zeta_std: f64) -> PoleUncertainty {
+        PoleUncertainty {
+            f_hz,
+            f_hz_std,
+            zeta,
+            zeta_std,
+        }
+    }
+
+    /// The `.mat` export's factor tables: a lead-lag on input 2 and a second-order
+    /// factor on every entry, each root with the standard deviations of the model file's
+    /// entry of the same frequency and damping (both roots of the conjugate pair).
+    #[test]
+    fn the_mat_export_holds_the_factors_roots_and_their_standard_deviations() {
+        let mut modal = ModalModel::new(2, 2);
+        modal.feedthrough = faer::Mat::from_fn(2, 2, |i, j| 1.0 + (i + 2 * j) as f64);
+        let mut model = FrfModel::new(modal);
+        model.factors.dynamics = vec![
+            DynamicsFactor::lead_lag(FactorTarget::Input(1), 300.0, 900.0),
+            DynamicsFactor::second_order(FactorTarget::All, 1500.0, 0.05),
+        ];
+        let mut e = export_state_space(&model, None, 0.0, None).unwrap();
+        e.dynamics_std = vec![
+            additive_riv::FactorStd {
+                poles: vec![pu(900.0, 1.5, 1.0, 0.0)],
+                zeros: vec![pu(300.0, 0.5, 1.0, 0.0)],
+            },
+            additive_riv::FactorStd {
+                poles: vec![pu(1500.0, 2.0, 0.05, 0.001)],
+                zeros: Vec::new(),
+            },
+        ];
+        let vars = parse_mat5(&mat_bytes(&e), "ss.mat").unwrap();
+        let table = |name: &str| -> (Vec<usize>, Vec<f64>) {
+            match &vars.iter().find(|v| v.name == name).unwrap().value {
+                MatValue::Numeric { dims, real, .. } => (dims.clone(), real.clone()),
+                MatValue::Other(k) => panic!("{name} is a {k}"),
+            }
+        };
+        let (dims, target) = table("dynamics_target");
+        assert_eq!(dims, vec![2, 2]);
+        // column-major: kinds, then indices
+        assert_eq!(target, vec![1.0, 0.0, 2.0, 0.0]);
+        let (dims, roots) = table("dynamics_roots");
+        assert_eq!(dims, vec![4, DYNAMICS_ROOT_COLUMNS.len()]);
+        let at = |r: usize, c: &str| {
+            let c = DYNAMICS_ROOT_COLUMNS.iter().position(|n| *n == c).unwrap();
+            roots[c * 4 + r]
+        };
+        // the lead-lag's pole, then its zero, then the pair
+        let expect = [
+            (1.0, 0.0, 900.0, 1.0, 1.5, 0.0),
+            (1.0, 1.0, 300.0, 1.0, 0.5, 0.0),
+            (2.0, 0.0, 1500.0, 0.05, 2.0, 0.001),
+            (2.0, 0.0, 1500.0, 0.05, 2.0, 0.001),
+        ];
+        for (r, &(factor, zero, f_hz, zeta, sf, sz)) in expect.iter().enumerate() {
+            assert_eq!(at(r, "factor"), factor, "row {r}");
+            assert_eq!(at(r, "zero"), zero, "row {r}");
+            assert!((at(r, "f_hz") / f_hz - 1.0).abs() < 1e-9, "row {r}");
+            assert!((at(r, "zeta") - zeta).abs() < 1e-9, "row {r}");
+            assert_eq!((at(r, "f_hz_std"), at(r, "zeta_std")), (sf, sz), "row {r}");
+        }
+        // the pair's roots are conjugate
+        assert_eq!(at(2, "im"), -at(3, "im"));
+        // without a model file's standard deviations they are NaN
+        e.dynamics_std.clear();
+        let vars = parse_mat5(&mat_bytes(&e), "ss.mat").unwrap();
+        match &vars
+            .iter()
+            .find(|v| v.name == "dynamics_roots")
+            .unwrap()
+            .value
+        {
+            MatValue::Numeric { real, .. } => assert!(real[6 * 4..].iter().all(|v| v.is_nan())),
+            MatValue::Other(k) => panic!("{k}"),
+        }
+    }
 }
