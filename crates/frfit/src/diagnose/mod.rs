@@ -100,6 +100,18 @@ struct State {
     mode_steps: Vec<(usize, f64, f64)>,
 }
 
+/// Reports the test of `what` in round `round` as progress and counts it in `n_tests`.
+fn announce(cfg: &PipelineConfig, n_tests: &mut usize, round: usize, what: &str) {
+    *n_tests += 1;
+    cfg.progress.step(
+        "diagnose",
+        *n_tests,
+        None,
+        None,
+        format!("round {round}: testing {what}"),
+    );
+}
+
 impl State {
     /// Marks the `missed_mode` steps whose modes `before` held (the model before the step
     /// at `step_index` and the modes it added) and `after` (the model once that step and
@@ -543,17 +555,9 @@ fn round(
         // nothing proposed while the residual is significant: modes without a peak of
         // their own (a merged close pair, a mode beyond a band edge) ...
         if repairs {
-            cfg.progress.step(
-                "diagnose",
-                st.n_tests + 1,
-                None,
-                None,
-                format!(
-                    "round {}: testing close pairs and modes beyond the band edges",
-                    st.n_accepted + 1
-                ),
-            );
-            st.n_tests += 1;
+            let round = st.n_accepted + 1;
+            let what = "close pairs and modes beyond the band edges";
+            announce(cfg, &mut st.n_tests, round, what);
             if let Some(t) = repairs_trial() {
                 return Some(vec![t]);
             }
@@ -567,17 +571,8 @@ fn round(
                     .map(|f| f.fit.model)
             })
             .as_ref()?;
-        cfg.progress.step(
-            "diagnose",
-            st.n_tests + 1,
-            None,
-            None,
-            format!(
-                "round {}: testing the common-denominator start's modes",
-                st.n_accepted + 1
-            ),
-        );
-        st.n_tests += 1;
+        let what = "the common-denominator start's modes";
+        announce(cfg, &mut st.n_tests, st.n_accepted + 1, what);
         return trial::common_denominator_modes(ctx, cfg, riv, &current, sk).map(|t| vec![t]);
     }
     let round_no = st.n_accepted + 1;

@@ -62,6 +62,35 @@ pub struct Screened {
 }
 
 impl Trial {
+    /// A trial that added the modes `joint` ((frequency, damping) each) together, each
+    /// reported as its own `missed_mode` step (`first` the trial's own parameters, the
+    /// step when `joint` is empty): `model` at weighted cost `cost`, its F test `f`
+    /// against `f_crit` for `added` real parameters.
+    fn missed_modes(
+        first: (f64, f64),
+        joint: Vec<(f64, f64)>,
+        evidence: String,
+        model: AdditiveModel,
+        (cost, f, f_crit, added): (f64, f64, f64, usize),
+    ) -> Self {
+        Trial {
+            params: FittedEffect::MissedMode {
+                f_hz: first.0,
+                zeta: first.1,
+            },
+            evidence,
+            model,
+            cost,
+            f,
+            f_crit,
+            added,
+            joint_modes: joint,
+            screened: None,
+            candidate: None,
+            held_out: None,
+        }
+    }
+
     /// Whether it passes its F test.
     pub fn passes(&self) -> bool {
         self.f > self.f_crit
@@ -205,38 +234,15 @@ pub fn joint_missed_modes(
         ..Default::default()
     };
     let (af, rep) = additive_riv::adapt_modes(current.model.clone(), fd, riv, &acfg).ok()?;
-    let m = af.model;
-    let c = model_cost(&m, fd);
-    let joint = new_modes(current.model, &m);
-    let added = m.n_params().saturating_sub(current.model.n_params());
-    let lowers_cost = c < current.cost;
-    if !(!joint.is_empty() && added > 0 && lowers_cost) {
-        return None;
-    }
-    let (_, f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
-    let list: Vec<String> = joint.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
-    let evidence = format!(
-        "significant residual peaks; modes added at every peak in {} round(s) of add/drop with the local test per mode (removed on the way: {}): {}",
-        rep.rounds,
-        rep.dropped.len(),
-        list.join(", ")
-    );
-    Some(Trial {
-        params: FittedEffect::MissedMode {
-            f_hz: joint[0].0,
-            zeta: joint[0].1,
-        },
-        evidence,
-        model: m,
-        cost: c,
-        f,
-        f_crit,
-        added,
-        joint_modes: joint,
-        screened: None,
-        candidate: None,
-        held_out: None,
-    })
+    let describe = |list: &str| {
+        format!(
+            "significant residual peaks; modes added at every peak in {} round(s) of add/drop with the local test per mode (removed on the way: {}): {list}",
+            rep.rounds,
+            rep.dropped.len(),
+        )
+    };
+    let c = model_cost(&af.model, fd);
+    new_modes_trial(fd, cfg, current, af.model, c, describe)
 }
 
 /// Missed modes from the common-denominator (Sanathanan-Koerner) start `sk`: its lightly
@@ -280,26 +286,47 @@ pub fn common_denominator_modes(
     let first = joint.first().copied().unwrap_or(new[0]);
     let list: Vec<String> = new.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
     let kept: Vec<String> = joint.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
-    Some(Trial {
-        params: FittedEffect::MissedMode {
-            f_hz: first.0,
-            zeta: first.1,
-        },
-        evidence: format!(
-            "nothing else proposed while the residual is significant: the common-denominator (sk) start holds lightly damped modes the model lacks at {}; added together and refitted: {}",
-            list.join(", "),
-            kept.join(", ")
-        ),
-        model: r.model,
-        cost: r.cost,
-        f,
-        f_crit,
-        added,
-        joint_modes: joint,
-        screened: None,
-        candidate: None,
-        held_out: None,
-    })
+    let evidence = format!(
+        "nothing else proposed while the residual is significant: the common-denominator (sk) start holds lightly damped modes the model lacks at {}; added together and refitted: {}",
+        list.join(", "),
+        kept.join(", ")
+    );
+    Some(Trial::missed_modes(
+        first,
+        joint,
+        evidence,
+        r.model,
+        (r.cost, f, f_crit, added),
+    ))
+}
+
+/// The trial of `model` (at weighted cost `c`), a refit of the current model that holds
+/// modes beyond its ([`new_modes`]), tested together against it ([`f_test`]), each
+/// reported as its own `missed_mode` step; the evidence is `describe` of their list.
+/// `None` when it holds no new mode, adds no parameter or does not lower the cost.
+fn new_modes_trial(
+    fd: &FitData,
+    cfg: &PipelineConfig,
+    current: &Current,
+    model: AdditiveModel,
+    c: f64,
+    describe: impl FnOnce(&str) -> String,
+) -> Option<Trial> {
+    let joint = new_modes(current.model, &model);
+    let added = model.n_params().saturating_sub(current.model.n_params());
+    if joint.is_empty() || added == 0 || c.is_nan() || c >= current.cost {
+        return None;
+    }
+    let (_, f, f_crit) = f_test(&model, fd, current.cost, c, added, cfg);
+    let list: Vec<String> = joint.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
+    let evidence = describe(&list.join(", "));
+    Some(Trial::missed_modes(
+        joint[0],
+        joint,
+        evidence,
+        model,
+        (c, f, f_crit, added),
+    ))
 }
 
 /// The loop's twin merge of a model at a cost, its notes appended to the vector; `None`
@@ -343,12 +370,6 @@ pub fn repaired_modes(
     let r = refit(m, fd, riv).ok()?;
     let mut notes = Vec::new();
     let (m, c) = merge_twins(r.model, r.cost, &mut notes)?;
-    let joint = new_modes(current.model, &m);
-    let added = m.n_params().saturating_sub(current.model.n_params());
-    if joint.is_empty() || added == 0 || c.is_nan() || c >= current.cost {
-        return None;
-    }
-    let (_, f, f_crit) = f_test(&m, fd, current.cost, c, added, cfg);
     let mut what: Vec<String> = edge
         .out_of_band
         .iter()
@@ -366,27 +387,13 @@ pub fn repaired_modes(
         )
     }));
     what.extend(notes);
-    let list: Vec<String> = joint.iter().map(|(f, _)| format!("{f:.2} Hz")).collect();
-    Some(Trial {
-        params: FittedEffect::MissedMode {
-            f_hz: joint[0].0,
-            zeta: joint[0].1,
-        },
-        evidence: format!(
-            "modes without a residual peak of their own: {}; refitted, the model holds new modes at {}",
-            what.join("; "),
-            list.join(", ")
-        ),
-        model: m,
-        cost: c,
-        f,
-        f_crit,
-        added,
-        joint_modes: joint,
-        screened: None,
-        candidate: None,
-        held_out: None,
-    })
+    let describe = |list: &str| {
+        format!(
+            "modes without a residual peak of their own: {}; refitted, the model holds new modes at {list}",
+            what.join("; ")
+        )
+    };
+    new_modes_trial(fd, cfg, current, m, c, describe)
 }
 
 /// A delay large enough to matter also misplaces the modes fitted without it: the fit
