@@ -1319,6 +1319,14 @@ fn markdown(
     }
 
     // Figures.
+    if s.command == "diagnose" {
+        let _ = writeln!(
+            md,
+            "The initial model, the one the diagnosis started from, is `{}` beside this \
+             report (the final one is the model file), for `frfit eval` or `frfit validate`.\n",
+            crate::run::START_MODEL_FILE
+        );
+    }
     let _ = writeln!(md, "## Figures\n");
     for (n, (file, alt, caption)) in figs.0.iter().enumerate() {
         let _ = writeln!(md, "![{alt}]({file})\n");

@@ -171,6 +171,19 @@ fn diagnose_finds_an_undeclared_delay_and_eval_includes_it() {
     // the final model's response includes the delay the loop added
     let e = eval_error(&report.join("model.json"), &csv, &dir);
     assert!(e < 1e-8, "median relative error {e:e}");
+    // the model the loop started from is kept beside it, and reproduces the step's
+    // error before
+    let start = report.join("start_model.json");
+    let e0 = eval_error(&start, &csv, &dir);
+    let before = s["initial"]["errors"]["median_rel"].as_f64().unwrap();
+    assert!(
+        (e0 / before - 1.0).abs() < 1e-6,
+        "the start model's median error {e0:e} against the summary's {before:e}"
+    );
+    assert!(read_json(&start)["provenance"]["estimator"]
+        .as_str()
+        .unwrap()
+        .contains("the start of the diagnosis"));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -43,6 +43,10 @@ use std::time::Instant;
 use validation::analysis::analyze_residual;
 use validation::noise::NoiseLevel;
 
+/// The file name of the diagnosis's start model in the report directory
+/// ([`PipelineOutput::start_model_file`]).
+pub const START_MODEL_FILE: &str = "start_model.json";
+
 /// Everything a run produced: the band, the fit, the noise level, the CMIF, the model
 /// responses for the report, and the summary.
 pub struct PipelineOutput {
@@ -69,6 +73,8 @@ pub struct PipelineOutput {
     pub initial_model: AdditiveModel,
     /// Response of the model before the diagnosis loop.
     pub initial_response: ResponseGrid,
+    /// Weighted cost of the model before the diagnosis loop on the band's fit data.
+    pub initial_cost: f64,
     /// Response of the final model.
     pub final_response: ResponseGrid,
     /// Standard deviation of the final model's response per line and entry (layout
@@ -144,8 +150,37 @@ impl PipelineOutput {
         Ok(file)
     }
 
+    /// The model file of the model the diagnosis loop started from
+    /// ([`PipelineOutput::initial_model`]: the first fit, a restart that replaced it, or
+    /// `fit`'s model), in the form of [`PipelineOutput::model_file`] without the final
+    /// model's standard deviations, so that a user can compare the two (`frfit eval`,
+    /// `frfit validate`).
+    pub fn start_model_file(
+        &self,
+        data_path: &std::path::Path,
+        producer: &str,
+    ) -> Result<additive_riv::ModelFile, additive_riv::RivError> {
+        let provenance = additive_riv::Provenance {
+            estimator: format!("{} (the start of the diagnosis)", self.fit.estimator),
+            data: Some(data_path.display().to_string()),
+            weighting: self.fitter_report.weighting.clone(),
+            cost: Some(self.initial_cost),
+            frfit_version: format!("{} ({producer})", env!("CARGO_PKG_VERSION")),
+            chain: self.chain.clone(),
+            ..Default::default()
+        };
+        let band = self.summary.data.band_hz;
+        additive_riv::ModelFile::from_model(
+            &self.initial_model,
+            self.band.units.clone(),
+            Some((band[0], band[1])),
+            provenance,
+        )
+    }
+
     /// Writes the model file to `model_path` (its folder created) and, with `report`,
-    /// the report into that directory (`report.md`, the figures, `summary.json`), as
+    /// the report into that directory (`report.md`, the figures, `summary.json`, and for
+    /// a diagnosis `start_model.json`, the model its loop started from), as
     /// `frfit fit`, `frfit diagnose` and the Python package write them; `data_path`
     /// names the data in the provenance and the report's title, `producer` what ran.
     pub fn write_outputs(
@@ -169,6 +204,16 @@ impl PipelineOutput {
             let title = format!("frfit {} of {}", self.summary.command, data_path.display());
             let input = self.report_input(&title)?;
             crate::report::write_report(dir, &input, &self.summary)?;
+            if self.summary.command == "diagnose" {
+                let path = dir.join(START_MODEL_FILE);
+                self.start_model_file(data_path, producer)
+                    .map_err(err("start model file"))?
+                    .write(&path)
+                    .map_err(|e| FrfitError::Io {
+                        path: path.display().to_string(),
+                        message: e.to_string(),
+                    })?;
+            }
         }
         Ok(())
     }
@@ -458,6 +503,7 @@ pub fn run(
         },
     );
     let peaks = fitter_report.cmif_peaks.clone();
+    let initial_cost = additive_riv::residual_stats::cost_of(&initial_model, &ctx.fit_data);
     let FitContext {
         band, noise, cmif, ..
     } = ctx;
@@ -472,6 +518,7 @@ pub fn run(
         peaks,
         initial_model,
         initial_response,
+        initial_cost,
         final_response,
         final_response_std,
         step_responses,
