@@ -14,7 +14,9 @@ use frfit::options::{
 use frfit::run::{self, PipelineOutput};
 use frfit::summary::StepSummary;
 use frfit::validation::{FrfValidation, GammaMethod};
-use frfit::validation_report::{validate_model, verdict_text, write_validation_dir};
+use frfit::validation_report::{
+    validate_model, verdict_text, write_validation_dir, FitDataOfModel,
+};
 use frfit::FrfitError;
 use pyo3::prelude::*;
 use std::path::{Path, PathBuf};
@@ -566,6 +568,25 @@ pub struct Validation {
     units: Option<String>,
 }
 
+impl Validation {
+    /// A per-line value that is there with the model's own uncertainty only.
+    fn per_line<'py>(
+        &self,
+        py: Python<'py>,
+        get: impl Fn(&frfit::validation::LineValidation) -> Option<f64>,
+    ) -> Option<Bound<'py, PyAny>> {
+        self.v.beyond_model_uncertainty.as_ref()?;
+        Some(real_1d(
+            py,
+            self.v
+                .lines
+                .iter()
+                .map(|l| get(l).unwrap_or(f64::NAN))
+                .collect(),
+        ))
+    }
+}
+
 #[pymethods]
 impl Validation {
     /// `not invalidated` or `invalidated at zero uncertainty`.
@@ -622,6 +643,32 @@ impl Validation {
     fn model_error<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
         real_1d(py, self.v.lines.iter().map(|l| l.model_error).collect())
     }
+    /// With `fit_data`: the reading with the model's own uncertainty next to the data's
+    /// (`verdict`, `lines_invalidated_at_zero`, `gamma_max`, `gamma_median`,
+    /// `model_bound_max`, `model_to_disturbance_median`) as a dict; `None` without it.
+    #[getter]
+    fn beyond_model_uncertainty<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
+        self.v
+            .beyond_model_uncertainty
+            .as_ref()
+            .map(|b| to_python(py, b))
+            .transpose()
+    }
+    /// With `fit_data`: the largest radius of the model's own uncertainty per line;
+    /// `None` without it.
+    #[getter]
+    fn model_bound<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        self.per_line(py, |l| l.model_bound)
+    }
+    /// With `fit_data`: `gamma` beyond the model's own uncertainty per line (what its
+    /// structure misses); `None` without it.
+    #[getter]
+    fn gamma_beyond_model<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        self.per_line(py, |l| l.gamma_beyond_model)
+    }
     /// The whole result (`validation.json`) as a dict.
     #[getter]
     fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
@@ -655,14 +702,18 @@ impl Validation {
 /// Validates `model` on an independent measurement `data` (with a variance): the
 /// minimum additive uncertainty per line (Oomen and Bosgra). `method`: `"closed-form"`
 /// (exact for additive uncertainty) or `"mu"` (the structured singular value bisection).
+/// `fit_data`: the data the model was fitted to (its band is the one the model records);
+/// the model's own uncertainty at the validation lines is then read next to the data's
+/// (`Validation.beyond_model_uncertainty`).
 #[pyfunction]
-#[pyo3(signature = (model, data, alpha=0.99, method="closed-form"))]
+#[pyo3(signature = (model, data, alpha=0.99, method="closed-form", fit_data=None))]
 pub fn validate(
     py: Python<'_>,
     model: &Model,
     data: &FrfData,
     alpha: f64,
     method: &str,
+    fit_data: Option<&FrfData>,
 ) -> PyResult<Validation> {
     let method = match method.to_ascii_lowercase().replace('_', "-").as_str() {
         "closed-form" => GammaMethod::ClosedForm,
@@ -670,8 +721,14 @@ pub fn validate(
         _ => return Err(arg_err("method", method, "expected closed-form or mu")),
     };
     let (file, frf) = (&model.file, &data.inner);
+    let config = frfit::pipeline::PipelineConfig::default();
+    let fitted_on = fit_data.map(|d| FitDataOfModel {
+        data: &d.inner,
+        config: &config,
+        name: source_of(d),
+    });
     let (v, model_desc) = py
-        .detach(|| validate_model(file, "model", frf, alpha, method))
+        .detach(|| validate_model(file, "model", frf, alpha, method, fitted_on.as_ref()))
         .map_err(to_py)?;
     Ok(Validation {
         v,

@@ -280,6 +280,24 @@ def test_validate_and_reduce():
         frfit.reduce(model, order=10_000)
 
 
+def test_validate_with_the_models_own_uncertainty():
+    # fitted at 1e-2 noise, validated on a measurement 100 times quieter: the data
+    # alone invalidate the estimate; its own uncertainty (from the fit data) explains it
+    data, _ = noisy(FREQ, rel=1e-2, seed=5)
+    model = frfit.fit(data, delay="none")
+    quiet, _ = noisy(FREQ, rel=1e-4, seed=6)
+    plain = frfit.validate(model, quiet)
+    assert not plain.not_invalidated, plain
+    assert plain.beyond_model_uncertainty is None and plain.model_bound is None
+    v = frfit.validate(model, quiet, fit_data=data)
+    b = v.beyond_model_uncertainty
+    assert b["verdict"] == "not_invalidated", b
+    assert b["model_to_disturbance_median"] > 1.0, b
+    assert v.verdict == plain.verdict
+    assert v.model_bound.shape == (len(FREQ),)
+    assert np.all(v.gamma_beyond_model <= v.gamma * (1 + 1e-12))
+
+
 def test_the_gil_is_released_during_a_fit():
     data, _ = noisy(np.linspace(10.0, 600.0, 4000))
     ticks = 0

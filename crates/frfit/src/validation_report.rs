@@ -42,7 +42,7 @@ pub fn verdict_text(v: Verdict) -> &'static str {
 /// Gamma, the model error and the disturbance bound against frequency.
 pub fn gamma_plot(v: &FrfValidation) -> LinePlot {
     let f: Vec<f64> = v.lines.iter().map(|l| l.f_hz).collect();
-    LinePlot::new("Minimum additive uncertainty per line")
+    let plot = LinePlot::new("Minimum additive uncertainty per line")
         .with_y(Axis::log("Magnitude"))
         .with_series(Series::line(
             "|G - P^| (model error seen by the data)",
@@ -59,9 +59,28 @@ pub fn gamma_plot(v: &FrfValidation) -> LinePlot {
         )
         .with_series(Series::dashed(
             "disturbance bound",
-            f,
+            f.clone(),
             v.lines.iter().map(|l| l.disturbance_bound).collect(),
-        ))
+        ));
+    if v.beyond_model_uncertainty.is_none() {
+        return plot;
+    }
+    plot.with_series(Series::dashed(
+        "model's own bound (its estimation uncertainty)",
+        f.clone(),
+        v.lines
+            .iter()
+            .map(|l| l.model_bound.unwrap_or(f64::NAN))
+            .collect(),
+    ))
+    .with_series(Series::line(
+        "gamma beyond the model's own uncertainty",
+        f,
+        v.lines
+            .iter()
+            .map(|l| l.gamma_beyond_model.unwrap_or(f64::NAN))
+            .collect(),
+    ))
 }
 
 /// The Markdown report of `v`: the model (`model`, described by `desc`) against the
@@ -114,6 +133,47 @@ pub fn markdown(
          validation experiment shrink the disturbance bound and gamma approaches the true \
          model error from below.\n"
     );
+    if let Some(b) = &v.beyond_model_uncertainty {
+        let _ = writeln!(s, "## With the model's own uncertainty\n");
+        let _ = writeln!(
+            s,
+            "The model's response has a standard deviation of its own (the fit data's noise \
+             carried through the parameters' covariance), independent of the validation \
+             data's noise: the residual of a model at the truth has the covariance of both. \
+             Read with both:\n"
+        );
+        let _ = writeln!(s, "- **verdict: {}**", verdict_text(b.verdict));
+        let _ = writeln!(
+            s,
+            "- lines neither explains (joint level): {} of {}",
+            b.lines_invalidated_at_zero,
+            v.lines.len()
+        );
+        let _ = writeln!(
+            s,
+            "- gamma beyond the model's own uncertainty (what its structure misses): max \
+             {:.4e}, median {:.4e} ({u})",
+            b.gamma_max, b.gamma_median
+        );
+        let _ = writeln!(
+            s,
+            "- the model's own bound: max {:.4e} ({u}); median ratio to the data's \
+             disturbance bound {:.3} ({})\n",
+            b.model_bound_max,
+            b.model_to_disturbance_median,
+            if b.model_to_disturbance_median < 1.0 {
+                "the validation data's noise dominates"
+            } else {
+                "the model's own uncertainty dominates"
+            }
+        );
+        let _ = writeln!(
+            s,
+            "gamma above is the uncertainty a robust design must cover (everything beyond the \
+             validation data's noise, the model's estimation error included); gamma beyond \
+             the model's own uncertainty is the part its estimation error does not explain.\n"
+        );
+    }
     let _ = writeln!(s, "![gamma against frequency](gamma.svg)\n");
     let mut top: Vec<_> = v.lines.iter().collect();
     top.sort_by(|a, b| b.gamma.total_cmp(&a.gamma));
@@ -172,23 +232,43 @@ pub fn check_alpha(alpha: f64) -> Result<(), FrfitError> {
     Ok(())
 }
 
+/// Where the model's own uncertainty in a validation comes from: the data it was fitted
+/// to, set up as the run that fitted it set them up (band, weighting;
+/// [`crate::pipeline::model_response_std_at`]), and a name for the report.
+pub struct FitDataOfModel<'a> {
+    /// The FRF the model was fitted to.
+    pub data: &'a frf_data::Frf,
+    /// The run's settings (only the band, hold, sample rate, FRF type and weighting are
+    /// read; without a band, the one the model file records).
+    pub config: &'a crate::pipeline::PipelineConfig,
+    /// The data's name in the report (a file name).
+    pub name: String,
+}
+
 /// Validates a model on an independent measurement `data` (with `_var` columns): the
 /// smallest additive uncertainty per line for which the model is not invalidated with
 /// probability `alpha` (Oomen and Bosgra; [`crate::validation::validate_frf`]). The
 /// variance's degrees of freedom come from the number of realizations `data` declares
 /// (its comments or metadata): with `R` of them the disturbance radii use the
-/// `F(2, 2(R-1))` quantile. `source` names the model in errors. Returns the validation
-/// and a one-line description of the model.
+/// `F(2, 2(R-1))` quantile. With `fitted_on`, the model's own uncertainty at the
+/// validation lines (its response's standard deviation from the information on the data
+/// it was fitted to) is read next to the data's
+/// ([`crate::validation::validate_frf_with_model_std`]); when no covariance can be
+/// formed (an unstable pole, a parameter the data do not determine) the validation runs
+/// without it and the description says why. `source` names the model in errors.
+/// Returns the validation and a one-line description of the model.
 pub fn validate_model(
     file: &additive_riv::ModelFile,
     source: &str,
     data: &frf_data::Frf,
     alpha: f64,
     method: crate::validation::GammaMethod,
+    fitted_on: Option<&FitDataOfModel>,
 ) -> Result<(FrfValidation, String), FrfitError> {
     use frf_data::FrfDataset;
     check_alpha(alpha)?;
-    let (grid, desc) = model_response(file, source, &data.omegas())?;
+    let omega = data.omegas();
+    let (grid, mut desc) = model_response(file, source, &omega)?;
     if (grid.ny, grid.nu) != (data.ny(), data.nu()) {
         return Err(FrfitError::argument(
             "--data",
@@ -202,6 +282,37 @@ pub fn validate_model(
             ),
         ));
     }
+    let model_std = match fitted_on {
+        Some(f) => {
+            let model = file.to_model().map_err(|e| FrfitError::Io {
+                path: source.to_string(),
+                message: e.to_string(),
+            })?;
+            // the band the run fitted, else the one the model file records
+            let config = crate::pipeline::PipelineConfig {
+                band_hz: f.config.band_hz.or(file.band_hz.map(|b| (b[0], b[1]))),
+                hold: f.config.hold,
+                fs_hz: f.config.fs_hz,
+                frf_type: f.config.frf_type,
+                weighting: f.config.weighting.clone(),
+                ..Default::default()
+            };
+            match crate::pipeline::model_response_std_at(&model, f.data, &config, &omega) {
+                Ok(sd) => {
+                    desc.push_str(&format!(
+                        "; its own uncertainty from the information on `{}`",
+                        f.name
+                    ));
+                    Some(sd)
+                }
+                Err(e) => {
+                    desc.push_str(&format!("; its own uncertainty is not included: {e}"));
+                    None
+                }
+            }
+        }
+        None => None,
+    };
     let cfg = crate::validation::FrfValidationConfig {
         alpha,
         method,
@@ -213,10 +324,16 @@ pub fn validate_model(
             .map(|r| 2.0 * (r as f64 - 1.0)),
         ..Default::default()
     };
-    let v =
-        crate::validation::validate_frf(&grid, data, None, &cfg).map_err(|e| FrfitError::Fit {
-            what: "validation".into(),
-            why: e.to_string(),
-        })?;
+    let v = crate::validation::validate_frf_with_model_std(
+        &grid,
+        model_std.as_deref(),
+        data,
+        None,
+        &cfg,
+    )
+    .map_err(|e| FrfitError::Fit {
+        what: "validation".into(),
+        why: e.to_string(),
+    })?;
     Ok((v, desc))
 }

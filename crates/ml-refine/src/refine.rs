@@ -221,6 +221,21 @@ impl Information {
         let var = self
             .prob
             .response_variance(&self.theta, &self.ev, &self.cov, entries);
+        self.scaled_std(var)
+    }
+
+    /// [`Information::response_std`] at the frequencies `omega` (rad/s) instead of the
+    /// data's lines, every entry ([`MlRefine::response_std_at_omegas`]).
+    fn response_std_at_omegas(&self, omega: &[f64]) -> Vec<f64> {
+        let at = self.prob.at_lines(omega.to_vec());
+        let var = self
+            .prob
+            .response_variance_at(&at, &self.theta, &self.ev, &self.cov, None);
+        self.scaled_std(var)
+    }
+
+    /// Unscaled response variances to standard deviations with the covariance scale.
+    fn scaled_std(&self, var: Vec<f64>) -> Vec<f64> {
         var.into_iter()
             // NaN (an entry not asked for) stays NaN: `max` would make it 0
             .map(|v| {
@@ -602,6 +617,30 @@ impl MlRefine {
         entries: Option<&[usize]>,
     ) -> Result<Vec<f64>, MlError> {
         Ok(self.information_at(data, model)?.response_std(entries))
+    }
+
+    /// The standard deviation of `model`'s response at the frequencies `omega` (rad/s;
+    /// any lines, e.g. those of an independent validation measurement), every entry
+    /// (layout `[k * m + e]`), from the information of the criterion on `data` (the data
+    /// the model was fitted to): [`MlRefine::response_std_at`] carried to other lines,
+    /// what the fit data's noise leaves uncertain in the model's response there. Same
+    /// errors as [`MlRefine::uncertainty_at`].
+    pub fn response_std_at_omegas<D: FrfDataset + ?Sized + Sync>(
+        &self,
+        data: &D,
+        model: &FrfModel,
+        omega: &[f64],
+    ) -> Result<Vec<f64>, MlError> {
+        if let Some(w) = omega.iter().find(|w| !(w.is_finite() && **w > 0.0)) {
+            return Err(MlError::invalid(
+                "frequencies of the response's standard deviation",
+                format!("{w} rad/s"),
+                "finite and positive",
+            ));
+        }
+        Ok(self
+            .information_at(data, model)?
+            .response_std_at_omegas(omega))
     }
 
     /// [`Estimator::estimate`] from `model`, after `drops` refinements that ended

@@ -697,13 +697,61 @@ impl Problem {
         cov: &[f64],
         entries: Option<&[usize]>,
     ) -> Vec<f64> {
+        self.response_variance_on(None, theta, ev, cov, entries)
+    }
+
+    /// [`Problem::response_variance`] at the lines of `at` instead of this problem's
+    /// (a problem of the same layout and template at other frequencies, with unit
+    /// weights: [`Problem::at_lines`]): the same covariance of the parameters, formed
+    /// on this problem's data, carried to the response at `at`'s lines. The row of a
+    /// line of `at` is `[d, b]` unweighted; its variance is
+    /// `(d - b M^{-1} B^T D) cov (d - b M^{-1} B^T D)^T + b M^{-1} b^T` with `M`, `B`
+    /// and `D` of this problem (the linear parameters' dependence on the poles through
+    /// their least-squares fit). Layout `[k * m + e]` over `at`'s lines; unscaled.
+    pub fn response_variance_at(
+        &self,
+        at: &Problem,
+        theta: &[f64],
+        ev: &Eval,
+        cov: &[f64],
+        entries: Option<&[usize]>,
+    ) -> Vec<f64> {
+        self.response_variance_on(Some(at), theta, ev, cov, entries)
+    }
+
+    /// This problem's layout and template at the lines `omega` (rad/s), with unit
+    /// weights and no data: the rows at which [`Problem::response_variance_at`]
+    /// evaluates the response's variance.
+    pub fn at_lines(&self, omega: Vec<f64>) -> Problem {
+        let n = omega.len();
+        let m = self.lay.m();
+        Problem::assemble(
+            self.lay.clone(),
+            Arc::new(omega),
+            Arc::new(vec![C64::new(0.0, 0.0); n * m]),
+            Arc::new(vec![1.0; n * m]),
+            self.template.clone(),
+            None,
+        )
+    }
+
+    fn response_variance_on(
+        &self,
+        at: Option<&Problem>,
+        theta: &[f64],
+        ev: &Eval,
+        cov: &[f64],
+        entries: Option<&[usize]>,
+    ) -> Vec<f64> {
         use faer::linalg::matmul::matmul;
         use faer::linalg::solvers::Solve;
         use faer::{Accum, Mat, Par, Side};
         let lines = self.lines(theta);
+        let at_lines = at.map(|p| p.lines(theta));
         let f = self.factors(theta);
         let lay = &self.lay;
         let (n, m, n_lin, n_nl) = (self.n_lines(), lay.m(), lay.n_lin(), lay.n_nl());
+        let n_out = at.map_or(n, Problem::n_lines);
         let rows = 2 * n;
         let cols = n_lin + n_nl + 1;
         let covm = Mat::from_fn(n_nl, n_nl, |i, j| cov[j * n_nl + i]);
@@ -748,7 +796,7 @@ impl Problem {
                                     .sum()
                             })
                         }
-                        Err(_) => return vec![f64::NAN; n],
+                        Err(_) => return vec![f64::NAN; n_out],
                     },
                 };
                 // H = B M^-1: leverage h_r = H_r . B_r; U = D - H (B^T D)
@@ -756,9 +804,25 @@ impl Problem {
                 let btd = b.transpose() * &d;
                 let mut u = d.clone();
                 matmul(u.as_mut(), Accum::Add, &h, &btd, -1.0, Par::Seq);
+                // the rows the variance is read at: this problem's (weighted), or those
+                // of `at` (unit weights) through this problem's fit
+                let (h, b, u, sw) = match (at, &at_lines) {
+                    (Some(at), Some(at_lines)) => {
+                        let na = at.n_lines();
+                        let mut a2 = vec![0.0; 2 * na * cols];
+                        at.fill_basis(at_lines, e, &mut a2, cols, n_lin + n_nl);
+                        at.fill_nonlinear(at_lines, &f, e, c, &mut a2, cols);
+                        let b2 = Mat::from_fn(2 * na, n_lin, |r, l| a2[r * cols + l] / norms[l]);
+                        let d2 = Mat::from_fn(2 * na, n_nl, |r, l| a2[r * cols + n_lin + l]);
+                        let h2 = &b2 * &minv;
+                        let mut u2 = d2;
+                        matmul(u2.as_mut(), Accum::Add, &h2, &btd, -1.0, Par::Seq);
+                        (h2, b2, u2, &at.sw)
+                    }
+                    _ => (h, b, u, &self.sw),
+                };
                 let w = &u * &covm;
-                let sw = &self.sw;
-                (0..n)
+                (0..n_out)
                     .map(|k| {
                         let s = sw[k * m + e];
                         let mut v = 0.0;
@@ -779,7 +843,7 @@ impl Problem {
                     .collect()
             })
             .collect();
-        let mut out = vec![f64::NAN; n * m];
+        let mut out = vec![f64::NAN; n_out * m];
         for (&e, v) in wanted.iter().zip(per) {
             for (k, x) in v.into_iter().enumerate() {
                 out[k * m + e] = x;

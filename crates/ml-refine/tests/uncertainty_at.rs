@@ -91,6 +91,7 @@ fn the_response_std_matches_the_spread_of_the_fitted_response() {
     let draws = 40;
     let mut ratio_sum = 0.0;
     let mut count = 0usize;
+    let (mut mid_sum, mut mid_count) = (0.0, 0usize);
     for s in 0..draws {
         let d = data(&truth, 400, 1e-3, 300 + s);
         let fit = MlRefine::default()
@@ -136,8 +137,48 @@ fn the_response_std_matches_the_spread_of_the_fitted_response() {
             ratio_sum += (a - b).norm_sqr() / (sd * sd);
             count += 1;
         }
+        // at other frequencies (the midpoints between the data's lines, as an
+        // independent validation measurement would have them): the same information
+        // carried to those lines; at the data's own lines it is the band above
+        let own = MlRefine::default()
+            .response_std_at_omegas(&d, &fit.model, &omega)
+            .unwrap();
+        for (a, b) in own.iter().zip(&std) {
+            assert!(
+                (a - b).abs() <= 1e-9 * b,
+                "{a} vs {b} at the data's own lines"
+            );
+        }
+        let mid: Vec<f64> = omega.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
+        let std_mid = MlRefine::default()
+            .response_std_at_omegas(&d, &fit.model, &mid)
+            .unwrap();
+        assert_eq!(std_mid.len(), mid.len() * 4);
+        let p = fit.model.freq_response(&mid).unwrap();
+        let p0 = truth.freq_response(&mid).unwrap();
+        for ((a, b), sd) in p.values.iter().zip(&p0.values).zip(&std_mid) {
+            mid_sum += (a - b).norm_sqr() / (sd * sd);
+            mid_count += 1;
+        }
     }
     let ratio = ratio_sum / count as f64;
     println!("mean |P - P0|^2 / predicted variance over {count} values: {ratio:.4}");
     assert!((0.85..1.15).contains(&ratio), "{ratio}");
+    let mid_ratio = mid_sum / mid_count as f64;
+    println!(
+        "between the lines: mean |P - P0|^2 / predicted variance over {mid_count} values: \
+         {mid_ratio:.4}"
+    );
+    assert!((0.85..1.15).contains(&mid_ratio), "{mid_ratio}");
+}
+
+/// Frequencies that are not positive and finite are refused with the value named.
+#[test]
+fn the_response_std_at_bad_frequencies_is_refused() {
+    let truth = system(11, 2, 2, 3, false, false);
+    let d = data(&truth, 400, 1e-3, 5);
+    let e = MlRefine::default()
+        .response_std_at_omegas(&d, &truth, &[10.0, f64::NAN])
+        .unwrap_err();
+    assert!(e.to_string().contains("NaN"), "{e}");
 }

@@ -62,7 +62,8 @@ pub use distortion::{floor_noise, line_floor, residual_ratio, LineFloor, LineFlo
 pub use disturbance::{chi2_2_quantile, Coverage, DisturbanceModel};
 pub use error::ValidationError;
 pub use frf_validation::{
-    validate_frf, FrfValidation, FrfValidationConfig, GammaMethod, LineValidation, Verdict,
+    validate_frf, validate_frf_with_model_std, BeyondModelUncertainty, FrfValidation,
+    FrfValidationConfig, GammaMethod, LineValidation, Verdict,
 };
 pub use invalidation::{
     invalidation_mu, min_gamma, min_gamma_additive, GammaConfig, LineData, MinGamma,

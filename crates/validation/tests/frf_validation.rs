@@ -7,7 +7,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use realize::ResponseGrid;
-use validation::{validate_frf, FrfValidationConfig, GammaMethod, Verdict};
+use validation::{
+    validate_frf, validate_frf_with_model_std, DisturbanceModel, FrfValidationConfig, GammaMethod,
+    Verdict,
+};
 
 fn c(rng: &mut ChaCha8Rng) -> C64 {
     C64::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5)
@@ -187,4 +190,91 @@ fn estimated_variance_radii_keep_their_coverage() {
     println!("coverage with F radii {pf:.4}, with chi-square radii {pc:.4}");
     assert!((pf - alpha).abs() < 0.004, "F coverage {pf}");
     assert!(pc < alpha - 0.02, "chi-square coverage {pc}");
+}
+
+/// The model's own uncertainty next to the data's (`validate_frf_with_model_std`): a
+/// model whose response carries an estimation error of known standard deviation (drawn
+/// complex Gaussian, 10 times the validation data's noise) is invalidated by the data's
+/// disturbance alone, and not invalidated once its own standard deviation is given (the
+/// joint level holds with probability alpha over all draws); a model with an error
+/// far beyond its standard deviation stays invalidated, with `gamma_beyond_model` near
+/// the excess. The data's own reading (verdict, gamma) is the same as `validate_frf`'s.
+#[test]
+fn the_models_own_uncertainty_explains_its_estimation_error() {
+    let (ny, nu, n) = (3, 2, 200);
+    let m = ny * nu;
+    let var_data: f64 = 1e-6;
+    let sd_model = 10.0 * var_data.sqrt();
+    let mut invalid_beyond = 0;
+    let trials = 20;
+    // the model's radius against the data's: 10 times, at the quantile of an error along
+    // one direction of the complex plane (the default coverage, per column of 3 outputs)
+    let cfg = FrfValidationConfig::default();
+    let expected = 10.0
+        * DisturbanceModel::non_circular_factor(cfg.coverage.per_component_alpha(cfg.alpha, ny))
+            .sqrt();
+    for seed in 0..trials {
+        let (truth, _, data) = problem(n, ny, nu, 0.0, var_data, 100 + seed);
+        let mut rng = ChaCha8Rng::seed_from_u64(900 + seed);
+        // the estimate's error: complex Gaussian with E |d|^2 = sd_model^2
+        let s = sd_model / 2f64.sqrt();
+        let values: Vec<C64> = truth
+            .iter()
+            .map(|t| {
+                let a: f64 = StandardNormal.sample(&mut rng);
+                let b: f64 = StandardNormal.sample(&mut rng);
+                t + C64::new(a, b) * s
+            })
+            .collect();
+        let model = ResponseGrid { ny, nu, values };
+        let sd = vec![sd_model; n * m];
+        let plain = validate_frf(&model, &data, None, &cfg).unwrap();
+        let v = validate_frf_with_model_std(&model, Some(&sd), &data, None, &cfg).unwrap();
+        assert_eq!(plain.verdict, Verdict::InvalidatedAtZeroUncertainty);
+        assert_eq!(v.verdict, plain.verdict);
+        assert_eq!(v.lines_invalidated_at_zero, plain.lines_invalidated_at_zero);
+        for (a, b) in v.lines.iter().zip(&plain.lines) {
+            assert!((a.gamma - b.gamma).abs() <= 1e-12 * (1.0 + b.gamma));
+            let gb = a.gamma_beyond_model.unwrap();
+            assert!(gb <= a.gamma + 1e-15, "{gb} > {}", a.gamma);
+            let ratio = a.model_bound.unwrap() / a.disturbance_bound;
+            assert!((ratio - expected).abs() < 1e-9, "{ratio} vs {expected}");
+        }
+        let b = v.beyond_model_uncertainty.as_ref().unwrap();
+        assert!((b.model_to_disturbance_median - expected).abs() < 1e-9);
+        invalid_beyond += usize::from(b.verdict == Verdict::InvalidatedAtZeroUncertainty);
+    }
+    // joint coverage alpha = 0.99 over all lines: at most a rare draw invalidates
+    println!("invalidated beyond the model's uncertainty in {invalid_beyond} of {trials} draws");
+    assert!(invalid_beyond <= 2, "{invalid_beyond} of {trials}");
+
+    // an error of 0.3 per entry, far beyond the stated 1e-2: still invalidated
+    let (_, model, data) = problem(n, ny, nu, 0.3, var_data, 7);
+    let sd = vec![1e-2; n * m];
+    let v = validate_frf_with_model_std(
+        &model,
+        Some(&sd),
+        &data,
+        None,
+        &FrfValidationConfig::default(),
+    )
+    .unwrap();
+    let b = v.beyond_model_uncertainty.unwrap();
+    assert_eq!(b.verdict, Verdict::InvalidatedAtZeroUncertainty);
+    assert!(b.gamma_median > 0.5 * v.gamma_median, "{b:?}");
+}
+
+/// A model standard deviation of the wrong length or with a NaN is refused, the NaN
+/// with its line and entry.
+#[test]
+fn a_bad_model_std_is_refused_with_its_place() {
+    let (_, model, data) = problem(5, 2, 2, 0.1, 1e-4, 3);
+    let cfg = FrfValidationConfig::default();
+    let e = validate_frf_with_model_std(&model, Some(&[0.1; 3]), &data, None, &cfg).unwrap_err();
+    assert!(e.to_string().contains("20 values"), "{e}");
+    let mut sd = vec![0.1; 20];
+    sd[4 * 2 + 3] = f64::NAN;
+    let e = validate_frf_with_model_std(&model, Some(&sd), &data, None, &cfg).unwrap_err();
+    let s = e.to_string();
+    assert!(s.contains("line 3") && s.contains("entry (2, 2)"), "{s}");
 }

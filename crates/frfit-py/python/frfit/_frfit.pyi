@@ -151,6 +151,9 @@ class Validation:
     gamma: npt.NDArray[np.float64]
     disturbance_bound: npt.NDArray[np.float64]
     model_error: npt.NDArray[np.float64]
+    beyond_model_uncertainty: Optional[Dict[str, Any]]
+    model_bound: Optional[npt.NDArray[np.float64]]
+    gamma_beyond_model: Optional[npt.NDArray[np.float64]]
     result: Dict[str, Any]
     def report(self, dir: _Path) -> None: ...
 
@@ -222,7 +225,13 @@ def diagnose(
     test_records: Optional[Tuple[npt.ArrayLike, npt.ArrayLike]] = None,
     test_period: Optional[int] = None,
 ) -> Diagnosis: ...
-def validate(model: Model, data: FrfData, alpha: float = 0.99, method: str = "closed-form") -> Validation: ...
+def validate(
+    model: Model,
+    data: FrfData,
+    alpha: float = 0.99,
+    method: str = "closed-form",
+    fit_data: Optional[FrfData] = None,
+) -> Validation: ...
 def reduce(model: Model, order: Optional[int] = None) -> Reduction: ...
 def load_model(path: _Path) -> Model: ...
 def simulate_random_modal(

@@ -104,7 +104,12 @@ pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
         "frfit diagnose",
     )?;
     if let Some(vdata) = &args.validate {
-        validate_final_model(&args, vdata, &model_path, quiet)?;
+        let fitted_on = frfit::validation_report::FitDataOfModel {
+            data: &data,
+            config: &cfg,
+            name: args.data.display().to_string(),
+        };
+        validate_final_model(&args, vdata, &model_path, &fitted_on, quiet)?;
     }
     if !args.test_records.is_empty() {
         // the records' sample rate: --fs, else the one the data declare
@@ -143,6 +148,7 @@ fn validate_final_model(
     args: &Args,
     vdata: &std::path::Path,
     model_path: &std::path::Path,
+    fitted_on: &frfit::validation_report::FitDataOfModel,
     quiet: bool,
 ) -> Result<(), FrfitError> {
     let vargs = validate::Args {
@@ -151,8 +157,9 @@ fn validate_final_model(
         alpha: args.alpha,
         method: validate::Method::ClosedForm,
         out: args.report.join("validation"),
+        fit_data: None,
     };
-    let v = validate::validate_into(&vargs, true)?;
+    let v = validate::validate_into(&vargs, true, Some(fitted_on))?;
     let md_path = args.report.join("report.md");
     let mut md = std::fs::read_to_string(&md_path).map_err(|e| FrfitError::io(&md_path, e))?;
     md.push_str(&format!(
@@ -170,6 +177,22 @@ fn validate_final_model(
         v.lines_invalidated_at_zero,
         v.lines.len()
     ));
+    let beyond = v.beyond_model_uncertainty.as_ref().map(|b| {
+        format!(
+            "with the model's own uncertainty (from the information on the fit data) next \
+             to the data's: **{}**, {} lines neither explains, gamma beyond it max {:.4e}, \
+             median {:.4e}; the model's bound against the data's disturbance bound: median \
+             ratio {:.3}",
+            validate::verdict_text(b.verdict),
+            b.lines_invalidated_at_zero,
+            b.gamma_max,
+            b.gamma_median,
+            b.model_to_disturbance_median
+        )
+    });
+    if let Some(t) = &beyond {
+        md.push_str(&format!("\n{}.\n", capitalised(t)));
+    }
     std::fs::write(&md_path, md).map_err(|e| FrfitError::io(&md_path, e))?;
     if !quiet {
         println!(
@@ -179,8 +202,20 @@ fn validate_final_model(
             v.gamma_max,
             v.gamma_median
         );
+        if let Some(t) = beyond {
+            println!("  {}", t.replace("**", ""));
+        }
     }
     Ok(())
+}
+
+/// `s` with its first letter in upper case.
+fn capitalised(s: &str) -> String {
+    let mut c = s.chars();
+    match c.next() {
+        Some(f) => f.to_uppercase().chain(c).collect(),
+        None => String::new(),
+    }
 }
 
 /// `--test-records`: the initial and the final model predict the test records

@@ -7,13 +7,19 @@
 //! variance of the averaged FRF, from which the disturbance bound of each line follows
 //! (Proposition 9, the averaging of Proposition 10 included). Only the model's response
 //! at the validation lines is used, so any model the CLI can read can be validated.
+//!
+//! With `--fit-data FIT.csv` (the data the model was fitted to; the band is the one the
+//! model file records) the model's own uncertainty is read next to the data's: the
+//! standard deviation of its response at the validation lines from the information on
+//! its fit data (`validation::validate_frf_with_model_std`). `frfit diagnose --validate`
+//! does this for its final model on its own data.
 
 use super::common::load_data;
 use clap::{Args as ClapArgs, ValueEnum};
 use frfit::additive_riv::ModelFile;
 use frfit::validation::{FrfValidation, GammaMethod};
 pub use frfit::validation_report::verdict_text;
-use frfit::validation_report::{check_alpha, validate_model, write_validation_dir};
+use frfit::validation_report::{check_alpha, validate_model, write_validation_dir, FitDataOfModel};
 use frfit::FrfitError;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -45,17 +51,37 @@ pub struct Args {
     /// Output directory.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// The FRF the model was fitted to: its own uncertainty (its response's standard
+    /// deviation at the validation lines, from the information on these data) is read
+    /// next to the validation data's noise. The band is the one the model file records.
+    #[arg(long, value_name = "FIT.csv")]
+    pub fit_data: Option<PathBuf>,
 }
 
 /// Runs `frfit validate`.
 pub fn run(args: Args, quiet: bool) -> Result<(), FrfitError> {
-    validate_into(&args, quiet).map(|_| ())
+    let fit = match &args.fit_data {
+        Some(p) => Some((load_data(p)?, p.display().to_string())),
+        None => None,
+    };
+    let config = frfit::pipeline::PipelineConfig::default();
+    let fitted_on = fit.as_ref().map(|(data, name)| FitDataOfModel {
+        data,
+        config: &config,
+        name: name.clone(),
+    });
+    validate_into(&args, quiet, fitted_on.as_ref()).map(|_| ())
 }
 
 /// Validates `args.model` on `args.data`, writes `validation.json`, `gamma.svg` and
 /// `report.md` into `args.out`, and returns the result (`frfit validate`, and
-/// `frfit diagnose --validate` for its final model).
-pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitError> {
+/// `frfit diagnose --validate` for its final model); with `fitted_on`, the model's own
+/// uncertainty is read next to the data's.
+pub fn validate_into(
+    args: &Args,
+    quiet: bool,
+    fitted_on: Option<&FitDataOfModel>,
+) -> Result<FrfValidation, FrfitError> {
     let t0 = Instant::now();
     // before the files are read, as the option is checked
     check_alpha(args.alpha)?;
@@ -69,7 +95,7 @@ pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitErr
         Method::ClosedForm => GammaMethod::ClosedForm,
         Method::Mu => GammaMethod::Mu,
     };
-    let (v, desc) = validate_model(&file, &source, &data, args.alpha, method)?;
+    let (v, desc) = validate_model(&file, &source, &data, args.alpha, method, fitted_on)?;
     write_validation_dir(
         &args.out,
         &args.model.display().to_string(),
@@ -87,6 +113,18 @@ pub fn validate_into(args: &Args, quiet: bool) -> Result<FrfValidation, FrfitErr
             v.lines.len(),
             t0.elapsed().as_secs_f64()
         );
+        if let Some(b) = &v.beyond_model_uncertainty {
+            println!(
+                "with the model's own uncertainty: {}, gamma beyond it max {:.3e}, median \
+                 {:.3e}; its bound against the data's: median ratio {:.3}",
+                verdict_text(b.verdict),
+                b.gamma_max,
+                b.gamma_median,
+                b.model_to_disturbance_median
+            );
+        } else if fitted_on.is_some() {
+            println!("{desc}");
+        }
         println!("written to {}", args.out.display());
     }
     Ok(v)

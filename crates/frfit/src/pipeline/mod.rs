@@ -22,8 +22,8 @@ pub use context::FitContext;
 pub use first_fit::{
     chain_fit, first_fit, fit_reference, FirstFit, SECOND_START, SECOND_START_RESIDUAL,
 };
-pub use summarize::final_model_summary;
 pub(crate) use summarize::{
     build_summary, distortion_summary, error_stats, information_uncertainty,
     information_uncertainty_and_response_std, ml_uncertainty, response_std, RunRecord,
 };
+pub use summarize::{final_model_summary, model_response_std_at};

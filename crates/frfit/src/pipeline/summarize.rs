@@ -5,6 +5,7 @@ use super::config::{PipelineConfig, NOT_ANALYSED};
 use super::context::FitContext;
 use crate::effects::{ModeParams, Repair};
 use crate::summary::*;
+use crate::FrfitError;
 use additive_riv::{AdditiveModel, FactorTarget, FitterReport, SubmodelKind};
 use frf_data::{Fit, Frf, FrfDataset};
 use realize::ResponseGrid;
@@ -435,6 +436,44 @@ pub(crate) fn response_std(
     information_refiner(ctx)
         .response_std_at(&ctx.band, &fm, Some(entries))
         .map_err(|e| e.to_string())
+}
+
+/// The standard deviation of `model`'s response at the frequencies `omega` (rad/s),
+/// every entry (layout `[k * m + e]`), from the information of the ML criterion on the
+/// data it was fitted to: `fit_data` set up as a run with `cfg` sets it up (the band,
+/// the pooled variance, the weighting and the stated realizations;
+/// [`ml_refine::MlRefine::response_std_at_omegas`]). It is the model's own estimation
+/// uncertainty at other lines, e.g. those of an independent validation measurement
+/// ([`crate::validation::validate_frf_with_model_std`]). Errors: the band or fit data
+/// cannot be formed, or no covariance can be formed at `model` (an unstable pole, a
+/// parameter the data do not determine), said in words.
+pub fn model_response_std_at(
+    model: &AdditiveModel,
+    fit_data: &frf_data::Frf,
+    cfg: &PipelineConfig,
+    omega: &[f64],
+) -> Result<Vec<f64>, FrfitError> {
+    use frf_data::ModelStructure;
+    // the band and its weights only: no delay estimate, no final analysis
+    let setup = PipelineConfig {
+        band_hz: cfg.band_hz,
+        hold: cfg.hold,
+        fs_hz: cfg.fs_hz,
+        frf_type: cfg.frf_type,
+        weighting: cfg.weighting.clone(),
+        delay: Some(additive_riv::DelayChoice::None),
+        final_analysis: false,
+        ..PipelineConfig::default()
+    };
+    let ctx = FitContext::new(fit_data, &setup)?;
+    let why = |e: String| FrfitError::Fit {
+        what: "the model's response uncertainty".into(),
+        why: e,
+    };
+    let fm = model.to_frf_model().map_err(|e| why(e.to_string()))?;
+    information_refiner(&ctx)
+        .response_std_at_omegas(&ctx.band, &fm, omega)
+        .map_err(|e| why(e.to_string()))
 }
 
 /// The ML refiner whose criterion the information at a final model is formed of: the
