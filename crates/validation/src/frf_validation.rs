@@ -168,6 +168,10 @@ pub struct FrfValidation {
     pub beyond_model_uncertainty: Option<BeyondModelUncertainty>,
 }
 
+/// One line's validation, whether some column is unexplained at the joint level by the
+/// data's disturbance, and by it with the model's own uncertainty (when given).
+type LineOutcome = (LineValidation, bool, Option<bool>);
+
 /// Validates the model response `model` (at the data's lines) against the validation
 /// FRF `data` with its variance, optionally with the disturbance covariance `C_v` per
 /// line (`ny x ny` column-major, line after line, as the nonparametric estimator gives
@@ -281,7 +285,7 @@ pub fn validate_frf_with_model_std(
     let unc = UncertaintyModel::additive(ny, nu);
     // one line at a time, independent of the others: the lines run in parallel (the mu
     // bisection costs milliseconds per column); the first failing line is reported
-    let one_line = |k: usize| -> Result<(LineValidation, bool, Option<bool>), ValidationError> {
+    let one_line = |k: usize| -> Result<LineOutcome, ValidationError> {
         let mut var = vec![0.0; m];
         let f = data.freq_hz(k);
         data.variance_line_into(k, &mut var);
@@ -431,7 +435,7 @@ pub fn validate_frf_with_model_std(
             beyond.map(|b| b.1),
         ))
     };
-    let results: Vec<Result<(LineValidation, bool, Option<bool>), ValidationError>> =
+    let results: Vec<Result<LineOutcome, ValidationError>> =
         (0..nl).into_par_iter().map(one_line).collect();
     let mut lines = Vec::with_capacity(nl);
     let mut n_invalid = 0;
