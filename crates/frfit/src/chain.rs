@@ -623,6 +623,10 @@ pub struct ChainRun {
     pub error: Option<String>,
     /// Whether it is the chain kept.
     pub kept: bool,
+    /// The hold the chain modelled when it is not the run's (`frfit fit`'s hold start,
+    /// e.g. `zoh:6400`); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hold: Option<String>,
 }
 
 /// Runs the initialiser(s) named by `init` (one name, a comma-separated list or `auto`),
@@ -672,6 +676,7 @@ pub fn run_chain(
                     fpe: Some(fpe),
                     error: None,
                     kept: false,
+                    hold: None,
                 });
                 if best.as_ref().is_none_or(|(b, _)| fpe < *b) {
                     best = Some((fpe, r));
@@ -684,6 +689,7 @@ pub fn run_chain(
                 fpe: None,
                 error: Some(e.to_string()),
                 kept: false,
+                hold: None,
             }),
         }
     }

@@ -135,3 +135,36 @@ fn the_piezo_like_case_fits_converged_stable_near_the_plant_and_diagnose_is_no_w
         );
     }
 }
+
+/// `fit` on the piezo-like case of other seeds (other mode shapes, static gains, phases,
+/// noise and distortion), from the estimate of its time records with the sample rate
+/// stated and no hold declared, as `frfit nonparametric` writes it: converged, every
+/// pole stable, the 5 modes of the plant and no more (the hold start keeps the
+/// zero-order hold; without it 3 of these 6 seeds did not converge and the others spent
+/// 6 to 10 modes on the hold's droop), near the plant.
+#[test]
+#[ignore = "slow tier (about 40 s on 2 cores): cargo test --workspace --release -- --ignored --skip known_failure"]
+fn other_piezo_seeds_fit_converged_to_their_five_modes() {
+    for seed in 3..=8 {
+        let (data, truth, _) = piezo_data(seed);
+        let t = std::time::Instant::now();
+        let fit = run(&data, "piezo", &PipelineConfig::default(), "fit").unwrap();
+        let fm = &fit.summary.final_model;
+        let med = median_rel(&fit.final_response, &truth);
+        println!(
+            "seed {seed}: {:.1} s, {} modes, hold {}, delay {:.2} us, {}, median |P - G0| / |G0| \
+             {med:.2e}, r {:.3}",
+            t.elapsed().as_secs_f64(),
+            fm.modes.len(),
+            fm.hold,
+            1e6 * fm.delay_s,
+            fm.convergence,
+            fit.summary.final_errors.residual_to_noise
+        );
+        let c = fm.convergence.to_ascii_lowercase();
+        assert!(!c.contains("not converged") && !c.contains("failed"), "seed {seed}: {c}");
+        assert_eq!(fit.fit.model.unstable_submodels().len(), 0, "seed {seed}");
+        assert_eq!(fm.modes.len(), 5, "seed {seed}: {:?}", fm.modes);
+        assert!(med < 0.02, "seed {seed}: median {med:.3e}");
+    }
+}
