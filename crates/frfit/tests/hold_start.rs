@@ -72,7 +72,11 @@ fn a_plant_measured_through_a_hold_gets_the_hold_and_its_modes() {
     );
     // both runs are on the record, the held one named and kept
     let runs = &out.summary.chain_runs;
-    assert!(runs.iter().any(|r| r.kept && r.hold.as_deref() == Some("zoh:500")), "{runs:?}");
+    assert!(
+        runs.iter()
+            .any(|r| r.kept && r.hold.as_deref() == Some("zoh:500")),
+        "{runs:?}"
+    );
     assert!(runs.iter().any(|r| r.hold.is_none()), "{runs:?}");
 }
 

@@ -162,7 +162,10 @@ fn other_piezo_seeds_fit_converged_to_their_five_modes() {
             fit.summary.final_errors.residual_to_noise
         );
         let c = fm.convergence.to_ascii_lowercase();
-        assert!(!c.contains("not converged") && !c.contains("failed"), "seed {seed}: {c}");
+        assert!(
+            !c.contains("not converged") && !c.contains("failed"),
+            "seed {seed}: {c}"
+        );
         assert_eq!(fit.fit.model.unstable_submodels().len(), 0, "seed {seed}");
         assert_eq!(fm.modes.len(), 5, "seed {seed}: {:?}", fm.modes);
         assert!(med < 0.02, "seed {seed}: median {med:.3e}");
