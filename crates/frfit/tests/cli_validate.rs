@@ -172,11 +172,13 @@ fn validate_reports_bad_input() {
 
 /// `diagnose --validate`: the final model is validated on the given measurement, the
 /// result is in DIR/validation/ and summarised in report.md.
-#[test]
-fn diagnose_validates_its_final_model() {
-    let dir = temp_dir("diagnose-validate");
-    let csv = write_plant(&dir, 0.0);
-    let report = dir.join("report");
+/// `frfit diagnose CSV --delay none --report REPORT --validate VDATA`: its
+/// `validation.json`.
+fn diagnose_and_validate(
+    csv: &std::path::Path,
+    report: &std::path::Path,
+    vdata: &std::path::Path,
+) -> serde_json::Value {
     let o = run(&[
         "diagnose",
         csv.to_str().unwrap(),
@@ -185,11 +187,19 @@ fn diagnose_validates_its_final_model() {
         "--report",
         report.to_str().unwrap(),
         "--validate",
-        csv.to_str().unwrap(),
+        vdata.to_str().unwrap(),
         "--quiet",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let v = read_json(&report.join("validation").join("validation.json"));
+    read_json(&report.join("validation").join("validation.json"))
+}
+
+#[test]
+fn diagnose_validates_its_final_model() {
+    let dir = temp_dir("diagnose-validate");
+    let csv = write_plant(&dir, 0.0);
+    let report = dir.join("report");
+    let v = diagnose_and_validate(&csv, &report, &csv);
     assert_eq!(v["lines"].as_array().unwrap().len(), 781);
     assert_eq!(v["verdict"], "not_invalidated");
     let md = std::fs::read_to_string(report.join("report.md")).unwrap();
@@ -382,19 +392,7 @@ fn a_models_estimation_error_is_explained_by_its_own_uncertainty() {
 
     // the same through `diagnose --validate` on its own fit data
     let report = dir.join("report");
-    let o = run(&[
-        "diagnose",
-        fit_csv.to_str().unwrap(),
-        "--delay",
-        "none",
-        "--report",
-        report.to_str().unwrap(),
-        "--validate",
-        quiet.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let v = read_json(&report.join("validation").join("validation.json"));
+    let v = diagnose_and_validate(&fit_csv, &report, &quiet);
     assert_eq!(
         v["beyond_model_uncertainty"]["verdict"], "not_invalidated",
         "{}",

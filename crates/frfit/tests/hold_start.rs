@@ -27,12 +27,7 @@ fn data(hold: Hold) -> Frf {
     let f: Vec<f64> = (0..781).map(|k| 5.0 + 0.25 * k as f64).collect();
     let w: Vec<f64> = f.iter().map(|x| TAU * x).collect();
     let frf = Frf::from_grid(f, m.freq_response(&w).unwrap()).unwrap();
-    let var: Vec<f64> = frf
-        .values()
-        .iter()
-        .map(|z| (1e-3 * z.norm()).powi(2))
-        .collect();
-    let mut frf = frf.with_variance(Some(var)).unwrap();
+    let mut frf = with_relative_variance(frf, 1e-3);
     frf.comments
         .push(frfit::nonparametric::sampling_comment(FS));
     frf

@@ -84,12 +84,7 @@ pub fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
         frf.value(k, i, j) * frf_data::C64::from_polar(1.0, -w[k] * delay_s)
     })
     .unwrap();
-    let var: Vec<f64> = frf
-        .values()
-        .iter()
-        .map(|z| (1e-3 * z.norm()).powi(2))
-        .collect();
-    let mut frf = frf.with_variance(Some(var)).unwrap();
+    let mut frf = with_relative_variance(frf, 1e-3);
     frf.units = Some("m/N".into());
     let path = dir.join("plant.csv");
     frf_data::io::write_frf_csv(
@@ -99,6 +94,16 @@ pub fn write_plant(dir: &Path, delay_s: f64) -> PathBuf {
     )
     .unwrap();
     path
+}
+
+/// `frf` (its values unchanged) with the variance `(rel |G|)^2` attached.
+pub fn with_relative_variance(frf: Frf, rel: f64) -> Frf {
+    let var: Vec<f64> = frf
+        .values()
+        .iter()
+        .map(|z| (rel * z.norm()).powi(2))
+        .collect();
+    frf.with_variance(Some(var)).unwrap()
 }
 
 /// The simulated wafer stage (seed 3), `periods` x `realizations`, lines up to 2 kHz,
