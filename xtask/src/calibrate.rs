@@ -147,9 +147,7 @@ pub fn run(a: Args) -> Result<(), Error> {
                 .values()
                 .iter()
                 .enumerate()
-                .map(|(i, g)| {
-                    g * C64::from_polar(1.0, -std::f64::consts::TAU * f[i / m] * delay_s)
-                })
+                .map(|(i, g)| g * C64::from_polar(1.0, -std::f64::consts::TAU * f[i / m] * delay_s))
                 .collect()
         };
         let mut tally = Tally::default();

@@ -36,6 +36,10 @@ use serde_json::Value;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+/// The file name of the diagnosis's start model in the report directory, beside
+/// `report.md` (the run writes it with the report).
+pub const START_MODEL_FILE: &str = "start_model.json";
+
 /// Above this many entries the Bode grid shows a subset.
 pub const MAX_GRID_PANELS: usize = 60;
 /// How many entries the Bode grid shows when the plant has more than
@@ -1324,7 +1328,7 @@ fn markdown(
             md,
             "The initial model, the one the diagnosis started from, is `{}` beside this \
              report (the final one is the model file), for `frfit eval` or `frfit validate`.\n",
-            crate::run::START_MODEL_FILE
+            START_MODEL_FILE
         );
     }
     let _ = writeln!(md, "## Figures\n");

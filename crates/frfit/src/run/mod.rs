@@ -44,8 +44,8 @@ use validation::analysis::analyze_residual;
 use validation::noise::NoiseLevel;
 
 /// The file name of the diagnosis's start model in the report directory
-/// ([`PipelineOutput::start_model_file`]).
-pub const START_MODEL_FILE: &str = "start_model.json";
+/// ([`PipelineOutput::start_model_file`]; the report links it).
+pub use crate::report::START_MODEL_FILE;
 
 /// Everything a run produced: the band, the fit, the noise level, the CMIF, the model
 /// responses for the report, and the summary.
