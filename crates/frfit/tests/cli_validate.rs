@@ -16,6 +16,12 @@ fn read_json(path: &std::path::Path) -> serde_json::Value {
 /// The 2 x 3 plant written into `dir` and fitted (`--delay none`): its CSV and model.
 fn fit_plant(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
     let csv = write_plant(dir, 0.0);
+    let model = fit_csv(&csv, dir);
+    (csv, model)
+}
+
+/// `frfit fit CSV --delay none --out DIR/model.json`: the model's path.
+fn fit_csv(csv: &std::path::Path, dir: &std::path::Path) -> std::path::PathBuf {
     let model = dir.join("model.json");
     let o = run(&[
         "fit",
@@ -27,7 +33,7 @@ fn fit_plant(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) 
         "--quiet",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    (csv, model)
+    model
 }
 fn validate(
     model: &std::path::Path,
@@ -334,19 +340,9 @@ fn noisy_plant(dir: &std::path::Path, name: &str, rel: f64, seed: u64) -> std::p
 #[test]
 fn a_models_estimation_error_is_explained_by_its_own_uncertainty() {
     let dir = temp_dir("validate-own-uncertainty");
-    let fit_csv = noisy_plant(&dir, "fit.csv", 1e-2, 11);
+    let fit_csv_path = noisy_plant(&dir, "fit.csv", 1e-2, 11);
     let quiet = noisy_plant(&dir, "quiet.csv", 1e-4, 12);
-    let model = dir.join("model.json");
-    let o = run(&[
-        "fit",
-        fit_csv.to_str().unwrap(),
-        "--delay",
-        "none",
-        "--out",
-        model.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let model = fit_csv(&fit_csv_path, &dir);
     // the data alone
     let plain = validate(&model, &quiet, &dir.join("plain"));
     assert_eq!(plain["verdict"], "invalidated_at_zero_uncertainty");
@@ -359,7 +355,7 @@ fn a_models_estimation_error_is_explained_by_its_own_uncertainty() {
         "--data",
         quiet.to_str().unwrap(),
         "--fit-data",
-        fit_csv.to_str().unwrap(),
+        fit_csv_path.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ]);
@@ -392,7 +388,7 @@ fn a_models_estimation_error_is_explained_by_its_own_uncertainty() {
 
     // the same through `diagnose --validate` on its own fit data
     let report = dir.join("report");
-    let v = diagnose_and_validate(&fit_csv, &report, &quiet);
+    let v = diagnose_and_validate(&fit_csv_path, &report, &quiet);
     assert_eq!(
         v["beyond_model_uncertainty"]["verdict"], "not_invalidated",
         "{}",
