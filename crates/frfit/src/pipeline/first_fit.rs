@@ -76,7 +76,8 @@ pub fn fit_reference(
     Some(starts(ctx, &fit_cfg, &fc, true))
 }
 
-/// The lowest fraction of the stated sample rate the band must reach for [`hold_start`]:
+/// The lowest fraction of the stated sample rate the band must reach for the hold start
+/// ([`hold_start_rate`]):
 /// there a zero-order hold's droop `sin(pi f / fs) / (pi f / fs)` is 6.5 % (0.68 at
 /// 0.47 fs, the top of a band up to 3 kHz at 6400 Hz), far above a measurement's noise.
 pub const HOLD_START_FRACTION: f64 = 0.2;
