@@ -291,11 +291,7 @@ pub fn validate_model(
             // the band the run fitted, else the one the model file records
             let config = crate::pipeline::PipelineConfig {
                 band_hz: f.config.band_hz.or(file.band_hz.map(|b| (b[0], b[1]))),
-                hold: f.config.hold,
-                fs_hz: f.config.fs_hz,
-                frf_type: f.config.frf_type,
-                weighting: f.config.weighting.clone(),
-                ..Default::default()
+                ..f.config.clone()
             };
             match crate::pipeline::model_response_std_at(&model, f.data, &config, &omega) {
                 Ok(sd) => {

@@ -799,13 +799,10 @@ impl Problem {
                         Err(_) => return vec![f64::NAN; n_out],
                     },
                 };
-                // H = B M^-1: leverage h_r = H_r . B_r; U = D - H (B^T D)
-                let h = &b * &minv;
+                // H = B M^-1: leverage h_r = H_r . B_r; U = D - H (B^T D), at the rows
+                // the variance is read at: this problem's (weighted), or those of `at`
+                // (unit weights) through this problem's fit
                 let btd = b.transpose() * &d;
-                let mut u = d.clone();
-                matmul(u.as_mut(), Accum::Add, &h, &btd, -1.0, Par::Seq);
-                // the rows the variance is read at: this problem's (weighted), or those
-                // of `at` (unit weights) through this problem's fit
                 let (h, b, u, sw) = match (at, &at_lines) {
                     (Some(at), Some(at_lines)) => {
                         let na = at.n_lines();
@@ -819,7 +816,12 @@ impl Problem {
                         matmul(u2.as_mut(), Accum::Add, &h2, &btd, -1.0, Par::Seq);
                         (h2, b2, u2, &at.sw)
                     }
-                    _ => (h, b, u, &self.sw),
+                    _ => {
+                        let h = &b * &minv;
+                        let mut u = d;
+                        matmul(u.as_mut(), Accum::Add, &h, &btd, -1.0, Par::Seq);
+                        (h, b, u, &self.sw)
+                    }
                 };
                 let w = &u * &covm;
                 (0..n_out)

@@ -99,10 +99,9 @@ fn hold_start_rate(
 ) -> Option<f64> {
     let top = ctx.fit_data.band_hz.1;
     ctx.fs_hz.filter(|&fs| {
+        // no hold given or declared (`ctx.hold` is the command line's, else the file's)
         !cfg.diagnose
-            && cfg.hold.is_none()
             && ctx.hold.is_none()
-            && fc.hold == Hold::None
             && fc.delay == additive_riv::DelayChoice::Auto
             && cfg.frf_type == super::config::FrfType::Displacement
             && top >= HOLD_START_FRACTION * fs
