@@ -39,6 +39,11 @@ pub struct Args {
     /// Noise draws per plant.
     #[arg(long, default_value_t = 100)]
     pub draws: usize,
+    /// The first draw's index (default 0): draws `first-draw .. first-draw + draws` run,
+    /// each with its own seed, so that one long run can be split into several whose
+    /// tables pool exactly (z RMS squared and coverage weighted by their z counts).
+    #[arg(long, default_value_t = 0)]
+    pub first_draw: usize,
     /// The chain's refiner (`ml` reports standard deviations).
     #[arg(long, default_value = "ml")]
     pub refine: String,
@@ -152,7 +157,7 @@ pub fn run(a: Args) -> Result<(), Error> {
         };
         let mut tally = Tally::default();
         let t0 = Instant::now();
-        for d in 0..a.draws {
+        for d in a.first_draw..a.first_draw + a.draws {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
                 a.seed.wrapping_mul(1_000_003).wrapping_add(d as u64 + 1),
             );
@@ -182,8 +187,8 @@ pub fn run(a: Args) -> Result<(), Error> {
                 ..PipelineConfig::default()
             };
             let out = run::run(&data, "calibrate", &pc, "fit").stage("fit")?;
-            tally.add(&out.summary, &truth, delay_s);
-            eprint!("\r{plant}: draw {}/{}", d + 1, a.draws);
+            tally.add(d, &out.summary, &truth, delay_s);
+            eprint!("\r{plant}: draw {}/{}", d + 1 - a.first_draw, a.draws);
         }
         eprintln!();
         println!(
@@ -212,29 +217,52 @@ struct Tally {
     delay: Pool,
     missed: usize,
     spurious: usize,
+    /// The draws with fitted modes beyond the truth's count: the draw, and the fitted
+    /// modes no true mode took (frequency Hz, damping, frequency standard deviation).
+    spurious_draws: Vec<(usize, Vec<(f64, f64, f64)>)>,
     no_std: usize,
 }
 
 impl Tally {
-    /// Adds one fit's summary against the true modes `(f_hz, zeta)` and delay.
-    fn add(&mut self, s: &frfit::summary::Summary, truth: &[(f64, f64)], delay_s: f64) {
+    /// Adds draw `draw`'s summary against the true modes `(f_hz, zeta)` and delay.
+    fn add(
+        &mut self,
+        draw: usize,
+        s: &frfit::summary::Summary,
+        truth: &[(f64, f64)],
+        delay_s: f64,
+    ) {
         let Some(u) = &s.uncertainty else {
             self.no_std += 1;
             return;
         };
-        self.spurious += u.modes.len().saturating_sub(truth.len());
+        let extra = u.modes.len().saturating_sub(truth.len());
+        self.spurious += extra;
+        let mut taken = vec![false; u.modes.len()];
         for &(f, z) in truth {
-            let Some(m) = u
+            let Some((k, m)) = u
                 .modes
                 .iter()
-                .min_by(|x, y| (x.f_hz - f).abs().total_cmp(&(y.f_hz - f).abs()))
-                .filter(|m| (m.f_hz - f).abs() < 0.01 * f)
+                .enumerate()
+                .min_by(|x, y| (x.1.f_hz - f).abs().total_cmp(&(y.1.f_hz - f).abs()))
+                .filter(|(_, m)| (m.f_hz - f).abs() < 0.01 * f)
             else {
                 self.missed += 1;
                 continue;
             };
+            taken[k] = true;
             self.f.push((m.f_hz - f) / m.f_hz_std);
             self.zeta.push((m.zeta - z) / m.zeta_std);
+        }
+        if extra > 0 {
+            let untaken = u
+                .modes
+                .iter()
+                .zip(&taken)
+                .filter(|(_, &t)| !t)
+                .map(|(m, _)| (m.f_hz, m.zeta, m.f_hz_std))
+                .collect();
+            self.spurious_draws.push((draw, untaken));
         }
         if let (Some(t), Some(st)) = (u.delay_s, u.delay_s_std) {
             self.delay.push((t - delay_s) / st);
@@ -251,6 +279,16 @@ impl Tally {
             "\ntrue modes without a fitted mode within 1 %: {}; fitted modes beyond the truth's count: {}; draws without standard deviations: {}",
             self.missed, self.spurious, self.no_std
         );
+        for (d, modes) in &self.spurious_draws {
+            println!(
+                "draw {d}: fitted modes no true mode took: {}",
+                modes
+                    .iter()
+                    .map(|(f, z, sf)| format!("{f:.2} Hz (zeta {z:.2e}, +-{sf:.2} Hz)"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
     }
 }
 
@@ -270,7 +308,7 @@ fn wafer(a: &Args) -> Result<(), Error> {
     let mut truth: Vec<(f64, f64)> = Vec::new();
     let mut delay_truth = 0.0;
     let t0 = Instant::now();
-    for d in 0..a.draws {
+    for d in a.first_draw..a.first_draw + a.draws {
         let exp = ExperimentConfig {
             grid: LineGrid::odd(stage.fs, 40_000, 0.0, 2000.0).stage("grid")?,
             periods,
@@ -293,7 +331,7 @@ fn wafer(a: &Args) -> Result<(), Error> {
         };
         let w = WaferStageExperiment::new(&stage, &ControllerConfig::default(), exp)
             .stage("wafer stage")?;
-        if d == 0 {
+        if truth.is_empty() {
             let t = w.stage.truth();
             truth = t.model.modes.iter().map(|m| (m.f_hz, m.zeta)).collect();
             // the fit's delay is the one beyond the exact hold's half sample
@@ -318,8 +356,8 @@ fn wafer(a: &Args) -> Result<(), Error> {
             ..PipelineConfig::default()
         };
         let out = run::run(&est.frf, "calibrate", &pc, "fit").stage("fit")?;
-        tally.add(&out.summary, &truth, delay_truth);
-        eprint!("\rwafer: draw {}/{}", d + 1, a.draws);
+        tally.add(d, &out.summary, &truth, delay_truth);
+        eprint!("\rwafer: draw {}/{}", d + 1 - a.first_draw, a.draws);
     }
     eprintln!();
     println!(
