@@ -70,6 +70,11 @@ pub struct Args {
     /// holds it at zero, without a standard deviation), so its delay `z` is measured.
     #[arg(long, default_value_t = 0.0)]
     pub delay_us: f64,
+    /// A directory to write each draw's data to (`random` and `close-pair` plants:
+    /// `<plant>_draw_<d>.csv`), so that a draw the table singles out can be fitted again
+    /// with `frfit fit` and its messages read.
+    #[arg(long, value_name = "DIR")]
+    pub save_data: Option<std::path::PathBuf>,
 }
 
 /// Pooled z statistics.
@@ -181,6 +186,18 @@ pub fn run(a: Args) -> Result<(), Error> {
                 Some(vec![sigma * sigma; n]),
             )
             .stage("data")?;
+            if let Some(dir) = &a.save_data {
+                std::fs::create_dir_all(dir).stage("--save-data")?;
+                frf_data::io::write_frf_csv(
+                    dir.join(format!("{plant}_draw_{d}.csv")),
+                    &data,
+                    &[format!(
+                        "calibrate: {plant} plant seed {}, draw {d}, delay {} us",
+                        a.seed, a.delay_us
+                    )],
+                )
+                .stage("--save-data")?;
+            }
             let pc = PipelineConfig {
                 refine: a.refine.clone(),
                 final_analysis: false,
