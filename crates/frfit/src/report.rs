@@ -332,6 +332,41 @@ fn added_cell(t: &crate::summary::StepSummary) -> String {
         (false, _) => "no".into(),
     }
 }
+/// The first fit's ML structure steps ([`ml_refine::StructureStep`]) as a table: what
+/// each changed, whether it was taken, the weighted cost before and after and the test.
+fn refinement_steps_table(md: &mut String, steps: &[ml_refine::StructureStep]) {
+    if steps.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "**Structure steps of the ML refinement** (part of the first fit; the weighted cost `sum w |G - P|^2` of the structure tested from, and of the trial):\n"
+    );
+    let _ = writeln!(
+        md,
+        "| # | change | taken | cost before | cost after | F (floor) |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|");
+    for (i, st) in steps.iter().enumerate() {
+        let f = match (st.f_statistic, st.f_critical) {
+            (Some(f), Some(c)) => format!("{} ({})", fmt_num(f), fmt_num(c)),
+            (Some(f), None) => fmt_num(f),
+            _ => "-".into(),
+        };
+        let _ = writeln!(
+            md,
+            "| {} | `{}`: {} | {} | {} | {} | {f} |",
+            i + 1,
+            st.change.name(),
+            st.change.describe(),
+            if st.accepted { "yes" } else { "no" },
+            fmt_num(st.cost_before),
+            st.cost_after.map_or("-".into(), fmt_num),
+        );
+    }
+    md.push('\n');
+}
+
 fn plural(n: usize) -> &'static str {
     if n == 1 {
         ""
@@ -1273,6 +1308,8 @@ fn markdown(
             list.join("; ")
         );
     }
+
+    refinement_steps_table(&mut md, &s.initial.refinement_steps);
 
     // The verdict.
     let _ = writeln!(

@@ -113,6 +113,14 @@ pub struct InitialSummary {
     /// plant's modes.
     #[serde(default)]
     pub repairs: Vec<RepairSummary>,
+    /// The ML refinement's changes of the first fit's structure, taken or not, in order
+    /// (`change`: `modes_added`, `mode_dropped`, `integrators_dropped`, `delay_freed`,
+    /// `poles_dropped` or `delay_held`, with its `params`; `accepted`; the weighted cost
+    /// before and after; the F statistic and its floor): the modes the refinement added
+    /// at residual peaks and those it dropped are steps a user can see, not only lines of
+    /// the messages. Empty without an `ml` link in the first fit's chain.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub refinement_steps: Vec<ml_refine::StructureStep>,
     /// `frfit diagnose` only: the diagnosis from its own first fit ended worse on the
     /// data than the model `frfit fit` gives, so it ran again from that model (the
     /// initial model above is then `fit`'s); what the replaced diagnosis ended with.

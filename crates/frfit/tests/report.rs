@@ -151,6 +151,16 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
             declared: vec![],
             restart: None,
             repairs: vec![],
+            refinement_steps: vec![ml_refine::StructureStep {
+                change: ml_refine::StructureChange::ModesAdded {
+                    start_hz: vec![121.0],
+                },
+                accepted: true,
+                cost_before: 2.5e6,
+                cost_after: Some(4.1e3),
+                f_statistic: Some(9.7e4),
+                f_critical: Some(25.0),
+            }],
             from_fit: None,
         },
         steps,
@@ -358,6 +368,12 @@ fn full_report_with_steps_and_variance() {
     let md = check_files(&dir, &files);
     assert_eq!(table_rows(&md, "| # | effect"), 2);
     assert_eq!(table_rows(&md, "| mode | f [Hz]"), 3);
+    // the ML refinement's structure step, with its costs and test
+    assert_eq!(table_rows(&md, "| # | change"), 1);
+    assert!(
+        md.contains("| 1 | `modes_added`: mode at 121.00 Hz | yes | 2.5e6 | 4100 | 97000 (25) |"),
+        "{md}"
+    );
     assert!(md.contains("**Verdict: noise-limited.**"));
     assert!(
         md.contains("f_hz = 120 ± 0.02, zeta = 0.0199 ± 4e-4"),

@@ -28,6 +28,7 @@ pub mod refine;
 mod search;
 mod shared;
 pub mod stats;
+pub mod steps;
 pub mod varpro;
 mod weight_groups;
 
@@ -36,6 +37,7 @@ pub use error::MlError;
 pub use jacobian::{currency_jacobian_into, AnalyticModel};
 pub use lm::LmSettings;
 pub use refine::{FactorUncertainty, MlRefine, MlReport, ModeUncertainty};
+pub use steps::{ModeTest, StructureChange, StructureStep};
 pub use varpro::ResidueForm;
 
 /// Complex double.

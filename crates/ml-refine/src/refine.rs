@@ -20,9 +20,10 @@
 pub use crate::config::{CovarianceScale, MlConfig};
 use crate::lm::covariance;
 use crate::search::{
-    add_missed_modes, free_held_delay, rechoose_integrators, retest_modes, Current, Setting,
+    add_missed_modes, free_held_delay, rechoose_integrators, retest_modes, Current, Log, Setting,
 };
 use crate::stats::{chi2_upper_tail, normal_upper_tail};
+use crate::steps::{StructureChange, StructureStep};
 use crate::varpro::{Layout, Problem, ResidueForm};
 use crate::MlError;
 use crate::C64;
@@ -126,6 +127,10 @@ pub struct MlReport {
     /// Start frequencies (Hz) of the modes the refinement added.
     #[serde(default)]
     pub added_modes_hz: Vec<f64>,
+    /// The changes of the structure the refinement tested, in order, taken or not
+    /// ([`StructureStep`]); empty in files written before they were recorded.
+    #[serde(default)]
+    pub structure_steps: Vec<StructureStep>,
     /// Cost evaluations (trial points) of all runs of the iterations.
     #[serde(default)]
     pub evaluations: usize,
@@ -210,6 +215,7 @@ impl Information {
             delay_s_std,
             factors,
             added_modes_hz: Vec::new(),
+            structure_steps: Vec::new(),
             evaluations: 1,
             jacobians: 1,
         }
@@ -350,7 +356,7 @@ impl Estimator for MlRefine {
         data: &D,
         start: ChainModel,
     ) -> Result<Fit<FrfModel, MlReport>, MlError> {
-        self.estimate_from(data, start.model, 0, (Vec::new(), Vec::new()))
+        self.estimate_from(data, start.model, 0, (Log::default(), Vec::new()))
     }
 }
 
@@ -644,7 +650,8 @@ impl MlRefine {
     }
 
     /// [`Estimator::estimate`] from `model`, after `drops` refinements that ended
-    /// unstable (see [`MlConfig::unstable_drops`]) whose messages are `carried`; the
+    /// unstable (see [`MlConfig::unstable_drops`]) whose messages and structure steps are
+    /// `carried`; the
     /// last `added_before.len()` pole pairs of `model` are modes an earlier refinement
     /// added (their start frequencies): they count against the limit of additions and
     /// are tested again at the final structure like the modes this refinement adds.
@@ -653,7 +660,7 @@ impl MlRefine {
         data: &D,
         model: FrfModel,
         drops: usize,
-        (carried, added_before): (Vec<String>, Vec<f64>),
+        (carried, added_before): (Log, Vec<f64>),
     ) -> Result<Fit<FrfModel, MlReport>, MlError> {
         let t0 = Instant::now();
         let cfg = &self.config;
@@ -666,8 +673,8 @@ impl MlRefine {
             ));
         }
         model.validate()?;
-        let mut messages = carried;
-        stabilise_start(&mut model, cfg.zeta_unstable, &mut messages)?;
+        let mut log = carried;
+        stabilise_start(&mut model, cfg.zeta_unstable, &mut log.messages)?;
         let Projected {
             prob,
             lay,
@@ -683,9 +690,9 @@ impl MlRefine {
         let const_num = lay.const_num;
         if measured && cfg.prune_real_poles {
             if let Some(m2) =
-                without_weak_real_pole((&prob, &lay), &eval0, &model, cfg.min_f, &mut messages)
+                without_weak_real_pole((&prob, &lay), &eval0, &model, cfg.min_f, &mut log)
             {
-                return self.estimate_from(data, m2, drops, (messages, added_before));
+                return self.estimate_from(data, m2, drops, (log, added_before));
             }
         }
         let w_top = data.omegas().iter().cloned().fold(0.0f64, f64::max);
@@ -718,28 +725,15 @@ impl MlRefine {
             out,
         };
         let mut added = added_before;
-        add_missed_modes(
-            &s,
-            &mut cur,
-            (&model, &w),
-            &mut added,
-            &mut work,
-            &mut messages,
-        );
+        add_missed_modes(&s, &mut cur, (&model, &w), &mut added, &mut work, &mut log);
         // the rigid body chosen again at the optimum, before a held delay is freed (one
         // refinement then continues both) and after
-        rechoose_integrators(&s, &mut cur, &model, &mut work, &mut messages);
+        rechoose_integrators(&s, &mut cur, &model, &mut work, &mut log);
         if held_delay {
-            free_held_delay(
-                &s,
-                &mut cur,
-                (&model, eval_start_cost),
-                &mut work,
-                &mut messages,
-            );
-            rechoose_integrators(&s, &mut cur, &model, &mut work, &mut messages);
+            free_held_delay(&s, &mut cur, (&model, eval_start_cost), &mut work, &mut log);
+            rechoose_integrators(&s, &mut cur, &model, &mut work, &mut log);
         }
-        let first_added = retest_modes(&s, &mut cur, &model, &mut added, &mut work, &mut messages);
+        let first_added = retest_modes(&s, &mut cur, &model, &mut added, &mut work, &mut log);
         let Current {
             prob,
             lay,
@@ -761,7 +755,18 @@ impl MlRefine {
         if !unsupported.is_empty() && drops < drop_limit && dynamics_stable {
             let next = unsupported.dropped_from(&fitted);
             if next.modal.pairs.len() + next.modal.real_poles.len() + next.modal.rigid.len() > 0 {
-                messages.push(format!(
+                let step = StructureStep {
+                    change: StructureChange::PolesDropped {
+                        poles: unsupported.all(),
+                        reason: "the data do not support them".into(),
+                    },
+                    accepted: true,
+                    cost_before: out.eval.cost,
+                    cost_after: None,
+                    f_statistic: None,
+                    f_critical: None,
+                };
+                log.step(step, format!(
                     "the optimum had poles the data do not support ({}) after {} iterations ({}): dropped, and refined again from that optimum",
                     unsupported.all().join(", "),
                     out.iterations,
@@ -774,7 +779,7 @@ impl MlRefine {
                     .filter(|(p, _)| unsupported.keeps(p))
                     .map(|(_, f)| *f)
                     .collect();
-                return self.estimate_from(data, next, drops + 1, (messages, carried));
+                return self.estimate_from(data, next, drops + 1, (log, carried));
             }
         }
         if !unsupported.unstable.is_empty() {
@@ -805,13 +810,23 @@ impl MlRefine {
             // modes and relative noise 1e-6: condition 8.9e16); held where it is
             let mut next = fitted.clone();
             next.factors.delay_fitted = false;
-            messages.push(format!(
+            let step = StructureStep {
+                change: StructureChange::DelayHeld {
+                    delay_s: fitted.factors.delay_s,
+                },
+                accepted: true,
+                cost_before: out.eval.cost,
+                cost_after: None,
+                f_statistic: None,
+                f_critical: None,
+            };
+            log.step(step, format!(
                 "the delay is not determined by the data (information matrix condition {cond:.2e}; with complex residues and a feedthrough it trades with the residues' phases) after {} iterations ({}): held at {:.4} us and refined again; give it with --delay SECONDS if it is known",
                 out.iterations,
                 out.convergence.describe(),
                 fitted.factors.delay_s * 1e6
             ));
-            return self.estimate_from(data, next, drops + 1, (messages, added));
+            return self.estimate_from(data, next, drops + 1, (log, added));
         }
         if unidentifiable && drops < drop_limit && weakest < 2 * np + lay.n_real {
             // a pole the data do not determine (a spurious real pole running off to
@@ -828,12 +843,25 @@ impl MlRefine {
                 next.modal.real_poles.remove(weakest - 2 * np);
             }
             if next.modal.pairs.len() + next.modal.real_poles.len() + next.modal.rigid.len() > 0 {
-                messages.push(format!(
+                let step = StructureStep {
+                    change: StructureChange::PolesDropped {
+                        poles: vec![what.clone()],
+                        reason: format!(
+                            "not determined by the data: information matrix condition {cond:.2e}"
+                        ),
+                    },
+                    accepted: true,
+                    cost_before: out.eval.cost,
+                    cost_after: None,
+                    f_statistic: None,
+                    f_critical: None,
+                };
+                log.step(step, format!(
                     "{what} is not determined by the data (information matrix condition {cond:.2e}) after {} iterations ({}): dropped, and refined again from that optimum",
                     out.iterations,
                     out.convergence.describe()
                 ));
-                return self.estimate_from(data, next, drops + 1, (messages, carried));
+                return self.estimate_from(data, next, drops + 1, (log, carried));
             }
         }
         if unidentifiable {
@@ -855,10 +883,10 @@ impl MlRefine {
                     i,
                     (out.eval.cost, scale),
                     fisher,
-                    &mut messages,
+                    &mut log.messages,
                 );
                 if let Some((d, c)) = profile.lower {
-                    messages.push(format!(
+                    log.messages.push(format!(
                         "the cost (poles held) is lower {:.3} us from the returned delay ({:.6e} against {:.6e}): the refinement stopped short of the delay's optimum, where the cost is nearly flat in it",
                         d * 1e6,
                         c,
@@ -870,7 +898,7 @@ impl MlRefine {
             None => (None, None),
         };
         if !out.convergence.is_converged() {
-            messages.push(format!(
+            log.messages.push(format!(
                 "ML refinement {}: the uncertainty holds at an optimum only; try more iterations, a start from another initialiser, or fewer modes",
                 out.convergence.describe()
             ));
@@ -878,13 +906,13 @@ impl MlRefine {
         if measured {
             if let Some(p) = p_value {
                 if p < 1e-3 {
-                    messages.push(format!(
+                    log.messages.push(format!(
                         "cost test: V/N_dof = {ratio:.3} (expected {expected:.3}, p = {p:.1e}): the residual exceeds the noise model (model error, or a variance estimated from few realizations); the standard deviations are scaled by sqrt({scale:.3})"
                     ));
                 }
             }
         } else {
-            messages.push(format!(
+            log.messages.push(format!(
                 "no measured variance: weighted least squares ({}), the noise scale estimated from the residual (V/N_dof = {ratio:.3e}) scales the covariance",
                 weighting.name()
             ));
@@ -920,6 +948,7 @@ impl MlRefine {
             delay_s_std,
             factors,
             added_modes_hz: added,
+            structure_steps: std::mem::take(&mut log.steps),
             evaluations: work.evaluations,
             jacobians: work.jacobians,
         };
@@ -934,7 +963,7 @@ impl MlRefine {
                 "maximum likelihood, Levenberg-Marquardt with variable projection ({})",
                 weighting.name()
             ),
-            messages,
+            messages: log.messages,
         };
         fit.push_timing("iterations", iter_time);
         fit.push_timing("evaluations", work.evaluation_time);
@@ -997,9 +1026,9 @@ fn without_weak_real_pole(
     eval0: &crate::varpro::Eval,
     model: &FrfModel,
     min_f: f64,
-    messages: &mut Vec<String>,
+    log: &mut Log,
 ) -> Option<FrfModel> {
-    let mut weakest: Option<(usize, f64)> = None;
+    let mut weakest: Option<(usize, f64, f64)> = None;
     for r in 0..model.modal.real_poles.len() {
         let mut m2 = model.clone();
         m2.modal.real_poles.remove(r);
@@ -1010,19 +1039,30 @@ fn without_weak_real_pole(
         let p2 = prob.with_layout(lay2.clone(), m2.clone());
         if let Ok(ev2) = p2.evaluate(&nonlinear_start(&m2, &lay2)) {
             let f = (ev2.cost - eval0.cost) / (lay.m() + 1) as f64;
-            if weakest.is_none_or(|(_, fw)| f < fw) {
-                weakest = Some((r, f));
+            if weakest.is_none_or(|(_, fw, _)| f < fw) {
+                weakest = Some((r, f, ev2.cost));
             }
         }
     }
-    let (r, f) = weakest.filter(|(_, f)| *f < min_f)?;
+    let (r, f, cost_without) = weakest.filter(|(_, f, _)| *f < min_f)?;
     let pole = model.modal.real_poles[r].pole;
     let mut m2 = model.clone();
     m2.modal.real_poles.remove(r);
     if m2.modal.pairs.len() + m2.modal.real_poles.len() + m2.modal.rigid.len() == 0 {
         return None;
     }
-    messages.push(format!(
+    let step = StructureStep {
+        change: StructureChange::PolesDropped {
+            poles: vec![format!("real pole at {pole:.3e} rad/s")],
+            reason: "the start's real pole explains too little".into(),
+        },
+        accepted: true,
+        cost_before: eval0.cost,
+        cost_after: Some(cost_without),
+        f_statistic: Some(f),
+        f_critical: Some(min_f),
+    };
+    log.step(step, format!(
         "start real pole at {pole:.3e} rad/s explains {f:.2} times the noise per parameter (< {min_f}): dropped before the iterations"
     ));
     Some(m2)

@@ -3,11 +3,13 @@
 //! ([`add_missed_modes`]), the rigid body chosen again ([`rechoose_integrators`]), a
 //! held delay freed ([`free_held_delay`]) and the modes tested again at the final
 //! structure ([`retest_modes`]). Each continues the [`Current`] optimum through one
-//! [`Setting`], and says what it did in the messages.
+//! [`Setting`], and says what it did in the [`Log`]: in words, and as typed
+//! [`StructureStep`]s.
 
 use crate::config::MlConfig;
 use crate::lm::{iterate, LmOutcome, LmSettings, Work};
 use crate::stats::chi2_upper_tail;
+use crate::steps::{ModeTest, StructureChange, StructureStep};
 use crate::varpro::{Eval, Layout, Problem};
 use crate::C64;
 use realize::FrfModel;
@@ -176,6 +178,24 @@ impl Current {
     }
 }
 
+/// What a refinement says it did: the messages, in words, and the structure steps,
+/// typed (the same changes).
+#[derive(Debug, Default)]
+pub(crate) struct Log {
+    /// Notes for the user.
+    pub messages: Vec<String>,
+    /// The changes of the structure, in order.
+    pub steps: Vec<StructureStep>,
+}
+
+impl Log {
+    /// Records a change of the structure and says it.
+    pub fn step(&mut self, step: StructureStep, message: String) {
+        self.steps.push(step);
+        self.messages.push(message);
+    }
+}
+
 /// The cost ratio `V / N_dof`, in units of the expected one, above which the structure
 /// adaptation looks for missed modes (with a chi-square p-value below 1e-3).
 const ADAPT_RATIO: f64 = 1.2;
@@ -291,6 +311,28 @@ fn max_added(cfg: &MlConfig, pairs: usize) -> usize {
     }
 }
 
+/// The structure step of the modes added at `start_hz` to the optimum `cur`, refined as
+/// `next`, with the F statistic `f_stat` of the addition against the floor `min_f`.
+fn added_step(
+    cur: &Current,
+    next: &Current,
+    start_hz: &[f64],
+    f_stat: f64,
+    min_f: f64,
+    accepted: bool,
+) -> StructureStep {
+    StructureStep {
+        change: StructureChange::ModesAdded {
+            start_hz: start_hz.to_vec(),
+        },
+        accepted,
+        cost_before: cur.out.eval.cost,
+        cost_after: Some(next.out.eval.cost),
+        f_statistic: Some(f_stat),
+        f_critical: Some(min_f),
+    }
+}
+
 /// The modes at the frequencies `new_f` (Hz, damping 0.01) added to the optimum `cur`
 /// and refined together, with the F statistic of the addition; `None` when the data
 /// cannot carry them.
@@ -346,7 +388,7 @@ pub(crate) fn add_missed_modes(
     (model, w): (&FrfModel, &[f64]),
     added: &mut Vec<f64>,
     work: &mut Work,
-    messages: &mut Vec<String>,
+    log: &mut Log,
 ) {
     let cfg = s.cfg;
     let max_added = max_added(cfg, cur.lay.n_pairs);
@@ -377,7 +419,7 @@ pub(crate) fn add_missed_modes(
                 if passes(&next.out, f_stat) {
                     tried = Some((peaks.clone(), next, f_stat));
                 } else {
-                    messages.push(format!(
+                    log.step(added_step(cur, &next, &peaks, f_stat, cfg.min_f, false), format!(
                         "modes added together at {} Hz (the residual's peaks) did not all hold (F = {:.1}, {}): the strongest alone is tried",
                         peaks.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
                         f_stat,
@@ -392,7 +434,8 @@ pub(crate) fn add_missed_modes(
             };
             *work = work.add(next.out.work);
             if !passes(&next.out, f_stat) {
-                messages.push(if next.out.convergence.is_converged() {
+                let step = added_step(cur, &next, &peaks[..1], f_stat, cfg.min_f, false);
+                log.step(step, if next.out.convergence.is_converged() {
                     format!(
                         "a mode added at {:.2} Hz (the residual's peak) did not explain more than noise (F = {:.1}): not kept",
                         peaks[0], f_stat
@@ -412,7 +455,8 @@ pub(crate) fn add_missed_modes(
         let Some((new_f, next, f_stat)) = tried else {
             break;
         };
-        messages.push(format!(
+        let step = added_step(cur, &next, &new_f, f_stat, cfg.min_f, true);
+        log.step(step, format!(
             "{} added at {} Hz (the residual's {}; the start missed {}): cost {:.4e} -> {:.4e}, F = {f_stat:.1}",
             if new_f.len() == 1 { "mode" } else { "modes" },
             new_f.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
@@ -435,7 +479,7 @@ pub(crate) fn rechoose_integrators(
     cur: &mut Current,
     model: &FrfModel,
     work: &mut Work,
-    messages: &mut Vec<String>,
+    log: &mut Log,
 ) {
     while s.measured
         && s.cfg.prune_integrators
@@ -452,7 +496,7 @@ pub(crate) fn rechoose_integrators(
         else {
             break;
         };
-        messages.push(step.message);
+        log.step(step.step, step.message);
         let Some(next) = step.kept else {
             break;
         };
@@ -473,7 +517,7 @@ pub(crate) fn free_held_delay(
     cur: &mut Current,
     (model, eval_start_cost): (&FrfModel, f64),
     work: &mut Work,
-    messages: &mut Vec<String>,
+    log: &mut Log,
 ) {
     if s.leaving(cur.lay.n_pairs, cur.lay.n_real)(&cur.out.theta).is_some() {
         return;
@@ -490,24 +534,35 @@ pub(crate) fn free_held_delay(
     let score = prob_f.evaluate(&theta_f).ok().map(|ev| {
         let (r, _) = prob_f.jacobian_r(&theta_f, &ev);
         let z2 = crate::lm::linearised_decrease(&r, theta_f.len());
-        let f_stat = s.nested_f(
-            (ev.cost, cur.n_params),
-            ((ev.cost - 0.5 * z2).max(0.0), n_params_f),
-        );
-        (ev, f_stat)
+        let linearised = (ev.cost - 0.5 * z2).max(0.0);
+        let f_stat = s.nested_f((ev.cost, cur.n_params), (linearised, n_params_f));
+        (ev, linearised, f_stat)
     });
+    let step = |accepted: bool, cost_after: f64, f_stat: f64| StructureStep {
+        change: StructureChange::DelayFreed {
+            held_s: model.factors.delay_s,
+        },
+        accepted,
+        cost_before: cur.out.eval.cost,
+        cost_after: Some(cost_after),
+        f_statistic: Some(f_stat),
+        f_critical: Some(s.cfg.min_f),
+    };
     match score {
-        Some((_, f_stat)) if f_stat.is_nan() || f_stat <= s.cfg.min_f => {
-            messages.push(format!(
+        Some((_, linearised, f_stat)) if f_stat.is_nan() || f_stat <= s.cfg.min_f => {
+            let step = step(false, linearised, f_stat);
+            log.step(step, format!(
                 "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and stays held after the structure adaptation: freed, it would explain {f_stat:.2} times the noise (the linearised decrease at the optimum, F <= {})",
                 model.factors.delay_s * 1e6,
                 eval_start_cost,
                 s.cfg.min_f
             ));
         }
-        Some((ev, _)) => {
+        Some((ev, _, f_stat)) => {
             let out_f = s.refine(&prob_f, theta_f, ev, n_params_f, &lay_f);
-            messages.push(format!(
+            // the score test's F: the refinement's own cost is the step's after-cost
+            let step = step(true, out_f.eval.cost, f_stat);
+            log.step(step, format!(
                 "the delay was held at {:.4} us while the start was far above the noise level (cost {:.4e}), and freed after the structure adaptation: cost {:.4e} -> {:.4e}",
                 model.factors.delay_s * 1e6,
                 eval_start_cost,
@@ -543,7 +598,7 @@ pub(crate) fn retest_modes(
     model: &FrfModel,
     added: &mut Vec<f64>,
     work: &mut Work,
-    messages: &mut Vec<String>,
+    log: &mut Log,
 ) -> usize {
     let mut first_added = cur.lay.n_pairs - added.len();
     // pairs tested and kept, and whether the refinement without them failed (those are
@@ -557,7 +612,7 @@ pub(crate) fn retest_modes(
         let Some(step) = retest_mode(s, cur, first_added, &tested, model) else {
             break;
         };
-        messages.push(step.message);
+        log.step(step.step, step.message);
         let Some(next) = step.dropped else {
             tested.push((step.pair, step.failed));
             continue;
@@ -582,6 +637,7 @@ pub(crate) fn retest_modes(
 /// and the refinement without the integrators when they were dropped.
 struct IntegratorStep {
     message: String,
+    step: StructureStep,
     kept: Option<Current>,
 }
 
@@ -629,8 +685,17 @@ fn drop_integrators(
     };
     let out_d = s.refine(&prob_d, out.theta.clone(), ev_d, n_params_d, &lay_d);
     let f_refined = f_of(out_d.eval.cost);
+    let step = |accepted: bool| StructureStep {
+        change: StructureChange::IntegratorsDropped { keep, of: k },
+        accepted,
+        cost_before: out.eval.cost,
+        cost_after: Some(out_d.eval.cost),
+        f_statistic: Some(f_refined),
+        f_critical: Some(cfg.min_f),
+    };
     if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
         return Some(IntegratorStep {
+            step: step(false),
             message: format!(
                 "{what} {verb} {f_held:.2} times the noise per parameter with the poles held (< {}), but the refinement without them {} (F = {f_refined:.2}): kept",
                 cfg.min_f,
@@ -644,6 +709,7 @@ fn drop_integrators(
         });
     }
     Some(IntegratorStep {
+        step: step(true),
         message: format!(
             "{what} {verb} {f_held:.2} times the noise per parameter at the optimum (< {}): dropped, cost {:.4e} -> {:.4e} after {} further iterations (F = {f_refined:.2})",
             cfg.min_f,
@@ -664,6 +730,7 @@ fn drop_integrators(
 /// refinement without it when it was dropped.
 struct ModeRetest {
     message: String,
+    step: StructureStep,
     pair: usize,
     /// The refinement without the mode did not converge.
     failed: bool,
@@ -757,8 +824,27 @@ fn retest_mode(
     let f_hz = pole(q).norm() / TAU;
     let out_d = s.refine(&prob_d, theta_d, ev_d, n_params_d, &lay_d);
     let f_refined = f_of(out_d.eval.cost);
+    let step = |accepted: bool| StructureStep {
+        change: StructureChange::ModeDropped {
+            f_hz,
+            zeta: -pole(q).re / pole(q).norm(),
+            tested_as: if q >= first_added {
+                ModeTest::Added
+            } else if suspect {
+                ModeTest::Twin
+            } else {
+                ModeTest::Narrow
+            },
+        },
+        accepted,
+        cost_before: out.eval.cost,
+        cost_after: Some(out_d.eval.cost),
+        f_statistic: Some(f_refined),
+        f_critical: Some(cfg.min_f),
+    };
     if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
         return Some(ModeRetest {
+            step: step(false),
             message: format!(
                 "{what} at {f_hz:.2} Hz, tested again at the final structure, explains {f_held:.2} times the noise per parameter with the other poles held, and the refinement without it {} (F = {f_refined:.2}): kept",
                 if out_d.convergence.is_converged() {
@@ -773,6 +859,7 @@ fn retest_mode(
         });
     }
     Some(ModeRetest {
+        step: step(true),
         message: format!(
             "{what} at {f_hz:.2} Hz, tested again at the final structure, explains {f_held:.2} times the noise per parameter with the other poles held: dropped, cost {:.4e} -> {:.4e} after {} further iterations (F = {f_refined:.2} < {})",
             out.eval.cost,

@@ -7,7 +7,7 @@
 mod common;
 use common::*;
 use frf_data::{ChainModel, Estimator};
-use ml_refine::{MlConfig, MlRefine, ResidueForm};
+use ml_refine::{MlConfig, MlRefine, ModeTest, ResidueForm, StructureChange};
 use proptest::prelude::*;
 
 proptest! {
@@ -113,6 +113,42 @@ fn missed_modes_clear_of_the_others_are_added_together() {
             "seed {seed}: one refinement adds the three modes\n{msgs}"
         );
         assert!(msgs.contains("modes added at"), "{msgs}");
+        // the same as typed structure steps: one addition of the three, taken, then each
+        // added mode tested again by the refinement without it, and kept
+        let steps = &fit.report.structure_steps;
+        let added: Vec<_> = steps
+            .iter()
+            .filter(|s| s.accepted && matches!(s.change, StructureChange::ModesAdded { .. }))
+            .collect();
+        assert_eq!(added.len(), 1, "{steps:?}");
+        let StructureChange::ModesAdded { start_hz } = &added[0].change else {
+            unreachable!()
+        };
+        assert_eq!(start_hz.len(), 3, "{steps:?}");
+        assert!(
+            added[0].cost_after.unwrap() < 1e-2 * added[0].cost_before
+                && added[0].f_statistic.unwrap() > added[0].f_critical.unwrap(),
+            "{steps:?}"
+        );
+        let retested = steps
+            .iter()
+            .filter(|s| {
+                matches!(
+                    s.change,
+                    StructureChange::ModeDropped {
+                        tested_as: ModeTest::Added,
+                        ..
+                    }
+                )
+            })
+            .collect::<Vec<_>>();
+        assert_eq!(retested.len(), 3, "{steps:?}");
+        assert!(
+            retested
+                .iter()
+                .all(|s| !s.accepted && s.cost_after.unwrap() > s.cost_before),
+            "{steps:?}"
+        );
         let ratio = fit.report.cost_ratio;
         assert!(ratio < 1.1, "seed {seed}: cost / dof {ratio:.3}\n{msgs}");
     }
@@ -151,6 +187,19 @@ fn integrators_the_data_do_not_need_are_dropped_and_a_rigid_body_stays() {
         assert_eq!(fit.model.modal.pairs.len(), 4, "seed {seed}\n{msgs}");
         if !rigid {
             assert!(msgs.contains("dropped"), "{msgs}");
+            // and as a structure step taken, the cost about the same without them
+            let step = fit
+                .report
+                .structure_steps
+                .iter()
+                .find(|s| {
+                    s.accepted && matches!(s.change, StructureChange::IntegratorsDropped { .. })
+                })
+                .unwrap_or_else(|| panic!("{:?}", fit.report.structure_steps));
+            assert!(
+                step.f_statistic.unwrap() < step.f_critical.unwrap(),
+                "{step:?}"
+            );
         }
         // without the test the integrators stay
         let kept = MlRefine::new(MlConfig {

@@ -338,6 +338,8 @@ pub(crate) struct RunRecord<'a> {
     pub timings: Vec<StageTime>,
     /// The estimator chain of the first fit.
     pub chain: Vec<String>,
+    /// The structure steps of the first fit's ML link ([`ml_structure_steps`]).
+    pub refinement_steps: Vec<ml_refine::StructureStep>,
     /// Every chain tried by a multi-initialiser first fit.
     pub chain_runs: Vec<crate::chain::ChainRun>,
     /// The refiner's uncertainty of the final model, when it has one.
@@ -352,6 +354,18 @@ pub(crate) fn ml_uncertainty(links: &[frf_data::LinkReport]) -> Option<Uncertain
     let l = links.iter().rev().find(|l| l.link == "ml")?;
     let r = l.details_as::<ml_refine::MlReport>()?;
     Some(uncertainty_summary(ML_METHOD, r))
+}
+
+/// The structure steps of the last ML link of `links` (the refinement whose model the
+/// chain returned); empty without one.
+pub(crate) fn ml_structure_steps(links: &[frf_data::LinkReport]) -> Vec<ml_refine::StructureStep> {
+    links
+        .iter()
+        .rev()
+        .find(|l| l.link == "ml")
+        .and_then(|l| l.details_as::<ml_refine::MlReport>())
+        .map(|r| r.structure_steps.clone())
+        .unwrap_or_default()
 }
 
 /// [`UncertaintySummary::method`] of the ML refiner's covariance at its own optimum.
@@ -536,6 +550,7 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
             declared: ctx.declared_list.clone(),
             restart: run.restart,
             repairs: repair_summaries(run.fitter_report.repair.as_ref()),
+            refinement_steps: run.refinement_steps,
             from_fit: run.from_fit,
         },
         steps: run.steps,

@@ -1,0 +1,141 @@
+//! The refinement's changes to the model's structure, typed: what [`crate::MlRefine`]
+//! added, dropped, freed or held, whether it took the change, and the weighted cost
+//! `sum w |G - P|^2` before and after (issue 42: a change to the model is a step the
+//! summary and the report can show, not only a line of the messages, which say the same
+//! in words). Carried in [`crate::MlReport::structure_steps`].
+
+use serde::{Deserialize, Serialize};
+
+/// Why a mode was tested again at the final structure ([`StructureChange::ModeDropped`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModeTest {
+    /// The refinement added it ([`StructureChange::ModesAdded`]).
+    Added,
+    /// It shares its resonance with another mode ([`frf_data::twins`]).
+    Twin,
+    /// Its half-power bandwidth is narrower than the line spacing around it.
+    Narrow,
+}
+
+/// One change of the structure. Serialised adjacently tagged, as the catalogue's steps
+/// are: `{"change": "modes_added", "params": {...}}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "change", content = "params", rename_all = "snake_case")]
+pub enum StructureChange {
+    /// Modes added at the residual's peaks, refined together (their start frequencies,
+    /// Hz; damping 0.01 at the start).
+    ModesAdded {
+        /// Start frequencies, Hz.
+        start_hz: Vec<f64>,
+    },
+    /// A mode dropped after it was tested again at the final structure.
+    ModeDropped {
+        /// Its natural frequency at the optimum it was tested at, Hz.
+        f_hz: f64,
+        /// Its relative damping there.
+        zeta: f64,
+        /// Why it was tested.
+        tested_as: ModeTest,
+    },
+    /// The integrators `1/s^(keep+1) .. 1/s^of` dropped (the rigid body chosen again).
+    IntegratorsDropped {
+        /// Integrators left.
+        keep: usize,
+        /// Integrators before.
+        of: usize,
+    },
+    /// The delay, held while the start was far above the noise level, freed.
+    DelayFreed {
+        /// The value it was held at, seconds.
+        held_s: f64,
+    },
+    /// Poles the data do not support (crossed into the right half-plane, ran off beyond
+    /// the band, not determined, a real pole that explains too little) dropped; the
+    /// refinement continued from that optimum.
+    PolesDropped {
+        /// The poles, in words (frequency or value).
+        poles: Vec<String>,
+        /// Why, in words.
+        reason: String,
+    },
+    /// The delay, which the data do not determine, held where it was.
+    DelayHeld {
+        /// The value it was held at, seconds.
+        delay_s: f64,
+    },
+}
+
+impl StructureChange {
+    /// The change's name, as in the files (`modes_added`, `mode_dropped`, ...).
+    pub fn name(&self) -> &'static str {
+        match self {
+            StructureChange::ModesAdded { .. } => "modes_added",
+            StructureChange::ModeDropped { .. } => "mode_dropped",
+            StructureChange::IntegratorsDropped { .. } => "integrators_dropped",
+            StructureChange::DelayFreed { .. } => "delay_freed",
+            StructureChange::PolesDropped { .. } => "poles_dropped",
+            StructureChange::DelayHeld { .. } => "delay_held",
+        }
+    }
+
+    /// What the change did, in a few words with its numbers.
+    pub fn describe(&self) -> String {
+        match self {
+            StructureChange::ModesAdded { start_hz } => format!(
+                "{} at {} Hz",
+                if start_hz.len() == 1 { "mode" } else { "modes" },
+                start_hz
+                    .iter()
+                    .map(|f| format!("{f:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            StructureChange::ModeDropped {
+                f_hz,
+                zeta,
+                tested_as,
+            } => format!(
+                "{} mode at {f_hz:.2} Hz (zeta {zeta:.2e})",
+                match tested_as {
+                    ModeTest::Added => "added",
+                    ModeTest::Twin => "twin",
+                    ModeTest::Narrow => "narrow",
+                }
+            ),
+            StructureChange::IntegratorsDropped { keep, of } => {
+                format!("integrators 1/s^{}..1/s^{of}", keep + 1)
+            }
+            StructureChange::DelayFreed { held_s } => {
+                format!("delay held at {:.4} us", held_s * 1e6)
+            }
+            StructureChange::PolesDropped { poles, reason } => {
+                format!("{} ({reason})", poles.join(", "))
+            }
+            StructureChange::DelayHeld { delay_s } => {
+                format!("delay at {:.4} us", delay_s * 1e6)
+            }
+        }
+    }
+}
+
+/// One structure step of a refinement: the change, whether it was taken, and its test.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StructureStep {
+    /// The change and its parameters.
+    #[serde(flatten)]
+    pub change: StructureChange,
+    /// Whether the model took the change.
+    pub accepted: bool,
+    /// The weighted cost at the optimum the change was tested from.
+    pub cost_before: f64,
+    /// The cost of the trial structure: refined when a refinement was run, the
+    /// linearised or held-poles cost of a score test otherwise; `None` without a trial
+    /// (a change forced by poles the data do not support).
+    pub cost_after: Option<f64>,
+    /// The F statistic of the test (the cost the larger structure explains per pair of
+    /// parameters over its noise scale), when one was made.
+    pub f_statistic: Option<f64>,
+    /// The floor the F statistic was held against ([`crate::MlConfig::min_f`]).
+    pub f_critical: Option<f64>,
+}
