@@ -19,6 +19,7 @@ use crate::residual_stats::{
 use crate::riv::{iterate_warm, RivConfig};
 use crate::significance::{f_critical_eff, f_statistic, submodel_cost_increase};
 use crate::{fit_numerators, AdditiveModel, RivError, SubmodelKind};
+use frf_data::structure::{StructureChange, StructureStep};
 use frf_data::Fit;
 use std::f64::consts::TAU;
 
@@ -96,6 +97,39 @@ pub struct AdaptReport {
     pub rounds: usize,
     /// Iterations of each refinement, in order.
     pub refinements: Vec<usize>,
+    /// The same changes as typed structure steps, in order, with the weighted cost
+    /// before and after each: per round, the modes removed by its checks
+    /// (`poles_dropped`), the modes added at its residual peaks (`modes_added`, taken
+    /// when one of them survived the round) and the added modes its checks removed
+    /// again (`poles_dropped`). Empty in reports written before they were recorded.
+    #[serde(default)]
+    pub steps: Vec<StructureStep>,
+}
+
+/// The structure step of modes removed by the adaptation's checks: `removed` holds
+/// each mode's frequency (Hz, NaN for real poles) and why; the cost from `before` to
+/// `after`.
+fn removal_step(removed: &[(f64, String)], before: f64, after: f64) -> StructureStep {
+    StructureStep {
+        change: StructureChange::PolesDropped {
+            poles: removed
+                .iter()
+                .map(|(f, why)| {
+                    if f.is_finite() {
+                        format!("mode at {f:.2} Hz: {why}")
+                    } else {
+                        format!("real poles: {why}")
+                    }
+                })
+                .collect(),
+            reason: "the structure adaptation's checks".into(),
+        },
+        accepted: true,
+        cost_before: before,
+        cost_after: Some(after),
+        f_statistic: None,
+        f_critical: None,
+    }
 }
 
 /// Candidate frequencies (Hz) of missed modes: local maxima of the per-line weighted
@@ -334,6 +368,15 @@ pub fn adapt_modes(
         } else {
             cost_of(&model, data)
         };
+        if !dropped.is_empty() {
+            let removed: Vec<(f64, String)> = dropped
+                .iter()
+                .map(|(_, f, why)| (*f, why.clone()))
+                .collect();
+            report
+                .steps
+                .push(removal_step(&removed, previous_cost, cost_now));
+        }
         let exact = cost_now <= EXACT_FIT_REL * data.weighted_energy();
         let first_order = model_first_order(&model);
         let stats = kept_stats.unwrap_or_else(|| ResidualStats::new(&model, data));
@@ -371,6 +414,16 @@ pub fn adapt_modes(
         let mut refit = match attempt {
             Ok(f) => f,
             Err(RivError::Numerical { why, .. }) => {
+                report.steps.push(StructureStep {
+                    change: StructureChange::ModesAdded {
+                        start_hz: peak_at.clone(),
+                    },
+                    accepted: false,
+                    cost_before: cost_now,
+                    cost_after: None,
+                    f_statistic: None,
+                    f_critical: None,
+                });
                 report.dropped.push((
                     f64::NAN,
                     format!(
@@ -389,6 +442,19 @@ pub fn adapt_modes(
         // 3. keep only the added modes that are significant and that remove most of
         //    the residual around them (a missed mode leaves only noise behind; a mode
         //    fitted to a broadband misfit only reshapes it)
+        // the round's additions as a structure step (taken when one survives), and the
+        // added modes its checks remove again
+        let mut added_step = (!added.is_empty()).then(|| StructureStep {
+            change: StructureChange::ModesAdded {
+                start_hz: peak_at.clone(),
+            },
+            accepted: false,
+            cost_before: cost_now,
+            cost_after: Some(cost_of(&refit.model, data)),
+            f_statistic: None,
+            f_critical: None,
+        });
+        let mut removed_added: Vec<(f64, String)> = Vec::new();
         if !added.is_empty() {
             let mut model = refit.model.clone();
             let after = ResidualStats::new(&model, data);
@@ -428,6 +494,7 @@ pub fn adapt_modes(
                 report
                     .dropped
                     .extend(local_reject.iter().map(|(_, f, why)| (*f, why.clone())));
+                removed_added.extend(local_reject.iter().map(|(_, f, why)| (*f, why.clone())));
             }
             let protect: Vec<usize> = (0..n_old).collect();
             let (dropped_new, stats, _) = drop_pass(&mut model, data, cfg, &protect)?;
@@ -444,6 +511,10 @@ pub fn adapt_modes(
             let survived = kept_added
                 .iter()
                 .any(|&i| !dropped_new.iter().any(|d| d.0 == remap(i)));
+            if let Some(st) = added_step.as_mut() {
+                st.accepted = survived;
+            }
+            removed_added.extend(dropped_new.iter().map(|(_, f, why)| (*f, why.clone())));
             if !survived && dropped.is_empty() {
                 changed = false;
             }
@@ -457,8 +528,24 @@ pub fn adapt_modes(
             }
         }
         fit = refit;
+        let cost_end = cost_of(&fit.model, data);
+        let undone = cost_end > previous_cost * (1.0 + 1e-9);
+        if let Some(mut st) = added_step {
+            st.accepted &= !undone;
+            report.steps.push(st);
+        }
+        if !removed_added.is_empty() {
+            let before = report
+                .steps
+                .last()
+                .and_then(|s| s.cost_after)
+                .unwrap_or(cost_now);
+            let mut st = removal_step(&removed_added, before, cost_end);
+            st.accepted = !undone;
+            report.steps.push(st);
+        }
         // a round that ends worse than it started (the refit went astray) is undone
-        if cost_of(&fit.model, data) > previous_cost * (1.0 + 1e-9) {
+        if undone {
             report.dropped.push((
                 f64::NAN,
                 format!("round {} undone: it raised the cost", round + 1),

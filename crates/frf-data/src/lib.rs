@@ -29,6 +29,7 @@ pub mod io;
 pub mod model;
 pub mod shared_data;
 pub mod stats;
+pub mod structure;
 pub mod truth;
 pub mod twins;
 pub mod uncertainty;

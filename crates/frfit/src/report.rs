@@ -332,22 +332,24 @@ fn added_cell(t: &crate::summary::StepSummary) -> String {
         (false, _) => "no".into(),
     }
 }
-/// The first fit's ML structure steps ([`ml_refine::StructureStep`]) as a table: what
-/// each changed, whether it was taken, the weighted cost before and after and the test.
-fn refinement_steps_table(md: &mut String, steps: &[ml_refine::StructureStep]) {
+/// The first fit's structure steps ([`crate::summary::StructureStepSummary`]) as a
+/// table: the refiner, what each changed, whether it was taken, the weighted cost before
+/// and after and the test.
+fn structure_steps_table(md: &mut String, steps: &[crate::summary::StructureStepSummary]) {
     if steps.is_empty() {
         return;
     }
     let _ = writeln!(
         md,
-        "**Structure steps of the ML refinement** (part of the first fit; the weighted cost `sum w |G - P|^2` of the structure tested from, and of the trial):\n"
+        "**Structure steps of the first fit's refiners** (part of the first fit; the weighted cost `sum w |G - P|^2` of the structure tested from, and of the trial):\n"
     );
     let _ = writeln!(
         md,
-        "| # | change | taken | cost before | cost after | F (floor) |"
+        "| # | link | change | taken | cost before | cost after | F (critical) |"
     );
-    let _ = writeln!(md, "|---|---|---|---|---|---|");
-    for (i, st) in steps.iter().enumerate() {
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    for (i, s) in steps.iter().enumerate() {
+        let st = &s.step;
         let f = match (st.f_statistic, st.f_critical) {
             (Some(f), Some(c)) => format!("{} ({})", fmt_num(f), fmt_num(c)),
             (Some(f), None) => fmt_num(f),
@@ -355,10 +357,11 @@ fn refinement_steps_table(md: &mut String, steps: &[ml_refine::StructureStep]) {
         };
         let _ = writeln!(
             md,
-            "| {} | `{}`: {} | {} | {} | {} | {f} |",
+            "| {} | {} | `{}`: {} | {} | {} | {} | {f} |",
             i + 1,
+            s.link,
             st.change.name(),
-            st.change.describe(),
+            cell(&st.change.describe()),
             if st.accepted { "yes" } else { "no" },
             fmt_num(st.cost_before),
             st.cost_after.map_or("-".into(), fmt_num),
@@ -1309,7 +1312,7 @@ fn markdown(
         );
     }
 
-    refinement_steps_table(&mut md, &s.initial.refinement_steps);
+    structure_steps_table(&mut md, &s.initial.structure_steps);
 
     // The verdict.
     let _ = writeln!(

@@ -113,14 +113,16 @@ pub struct InitialSummary {
     /// plant's modes.
     #[serde(default)]
     pub repairs: Vec<RepairSummary>,
-    /// The ML refinement's changes of the first fit's structure, taken or not, in order
-    /// (`change`: `modes_added`, `mode_dropped`, `integrators_dropped`, `delay_freed`,
-    /// `poles_dropped` or `delay_held`, with its `params`; `accepted`; the weighted cost
-    /// before and after; the F statistic and its floor): the modes the refinement added
-    /// at residual peaks and those it dropped are steps a user can see, not only lines of
-    /// the messages. Empty without an `ml` link in the first fit's chain.
+    /// The changes of the first fit's structure that its refiners tested, taken or not,
+    /// in order: the refined-IV structure adaptation's (`link`: `riv`) and the ML
+    /// refinement's (`ml`), each with its `change` (`modes_added`, `mode_dropped`,
+    /// `integrators_dropped`, `delay_freed`, `poles_dropped` or `delay_held`) and
+    /// `params`, `accepted`, the weighted cost before and after, and the F statistic with
+    /// its critical value where a test was made. The modes a refiner added at residual
+    /// peaks and those it dropped are steps a user can see, not only lines of the
+    /// messages. Empty when no refiner changed the structure.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub refinement_steps: Vec<ml_refine::StructureStep>,
+    pub structure_steps: Vec<StructureStepSummary>,
     /// `frfit diagnose` only: the diagnosis from its own first fit ended worse on the
     /// data than the model `frfit fit` gives, so it ran again from that model (the
     /// initial model above is then `fit`'s); what the replaced diagnosis ended with.
@@ -178,6 +180,16 @@ pub struct RepairSummary {
     /// before it was recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cost: Option<CostChange>,
+}
+
+/// One structure step of a refiner of the first fit ([`InitialSummary::structure_steps`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StructureStepSummary {
+    /// The link of the chain that made it (`riv` or `ml`).
+    pub link: String,
+    /// The step.
+    #[serde(flatten)]
+    pub step: frf_data::structure::StructureStep,
 }
 
 /// A weighted cost before and after a change of the model.

@@ -8,12 +8,13 @@
 
 use faer::Mat;
 use frf_data::cmif::{cmif, pick_peaks, PeakConfig};
+use frf_data::structure::{StructureChange, StructureStep};
 use frf_data::{Frf, FrfDataset, C64};
 use frfit::effects::{FactorParams, FactorSupport, FittedEffect, PoleParams};
 use frfit::report::{write_report, ReportInput};
 use frfit::summary::{
     DataSummary, ErrorStats, FinalModelSummary, InitialSummary, ModeSummary, PeakSummary,
-    StageTime, StepSummary, Summary, SCHEMA, VERSION,
+    StageTime, StepSummary, StructureStepSummary, Summary, SCHEMA, VERSION,
 };
 use realize::{ModalModel, PolePair, ResponseGrid};
 use std::path::{Path, PathBuf};
@@ -151,16 +152,35 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
             declared: vec![],
             restart: None,
             repairs: vec![],
-            refinement_steps: vec![ml_refine::StructureStep {
-                change: ml_refine::StructureChange::ModesAdded {
-                    start_hz: vec![121.0],
+            structure_steps: vec![
+                StructureStepSummary {
+                    link: "riv".into(),
+                    step: StructureStep {
+                        change: StructureChange::PolesDropped {
+                            poles: vec!["mode at 410.00 Hz: insignificant (F = 1.2 < 9.1)".into()],
+                            reason: "the structure adaptation's checks".into(),
+                        },
+                        accepted: true,
+                        cost_before: 2.49e6,
+                        cost_after: Some(2.5e6),
+                        f_statistic: None,
+                        f_critical: None,
+                    },
                 },
-                accepted: true,
-                cost_before: 2.5e6,
-                cost_after: Some(4.1e3),
-                f_statistic: Some(9.7e4),
-                f_critical: Some(25.0),
-            }],
+                StructureStepSummary {
+                    link: "ml".into(),
+                    step: StructureStep {
+                        change: StructureChange::ModesAdded {
+                            start_hz: vec![121.0],
+                        },
+                        accepted: true,
+                        cost_before: 2.5e6,
+                        cost_after: Some(4.1e3),
+                        f_statistic: Some(9.7e4),
+                        f_critical: Some(25.0),
+                    },
+                },
+            ],
             from_fit: None,
         },
         steps,
@@ -368,10 +388,16 @@ fn full_report_with_steps_and_variance() {
     let md = check_files(&dir, &files);
     assert_eq!(table_rows(&md, "| # | effect"), 2);
     assert_eq!(table_rows(&md, "| mode | f [Hz]"), 3);
-    // the ML refinement's structure step, with its costs and test
-    assert_eq!(table_rows(&md, "| # | change"), 1);
+    // the first fit's structure steps, with their refiner, costs and test
+    assert_eq!(table_rows(&md, "| # | link | change"), 2);
     assert!(
-        md.contains("| 1 | `modes_added`: mode at 121.00 Hz | yes | 2.5e6 | 4100 | 97000 (25) |"),
+        md.contains(
+            "| 2 | ml | `modes_added`: mode at 121.00 Hz | yes | 2.5e6 | 4100 | 97000 (25) |"
+        ),
+        "{md}"
+    );
+    assert!(
+        md.contains("| 1 | riv | `poles_dropped`: mode at 410.00 Hz: insignificant (F = 1.2 < 9.1) (the structure adaptation's checks) | yes | 2.49e6 | 2.5e6 | - |"),
         "{md}"
     );
     assert!(md.contains("**Verdict: noise-limited.**"));

@@ -28,16 +28,17 @@ pub mod refine;
 mod search;
 mod shared;
 pub mod stats;
-pub mod steps;
 pub mod varpro;
 mod weight_groups;
 
 pub use config::{CovarianceScale, MlConfig};
 pub use error::MlError;
+/// The typed structure steps ([`MlReport::structure_steps`]), from the workspace's one
+/// definition ([`frf_data::structure`]).
+pub use frf_data::structure::{ModeTest, StructureChange, StructureStep};
 pub use jacobian::{currency_jacobian_into, AnalyticModel};
 pub use lm::LmSettings;
 pub use refine::{FactorUncertainty, MlRefine, MlReport, ModeUncertainty};
-pub use steps::{ModeTest, StructureChange, StructureStep};
 pub use varpro::ResidueForm;
 
 /// Complex double.

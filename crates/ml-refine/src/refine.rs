@@ -23,10 +23,10 @@ use crate::search::{
     add_missed_modes, free_held_delay, rechoose_integrators, retest_modes, Current, Log, Setting,
 };
 use crate::stats::{chi2_upper_tail, normal_upper_tail};
-use crate::steps::{StructureChange, StructureStep};
 use crate::varpro::{Layout, Problem, ResidueForm};
 use crate::MlError;
 use crate::C64;
+use frf_data::structure::{StructureChange, StructureStep};
 use frf_data::{ChainModel, Convergence, Estimator, Fit, FrfDataset, Weighting};
 use realize::FrfModel;
 use serde::{Deserialize, Serialize};

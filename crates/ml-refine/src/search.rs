@@ -9,9 +9,9 @@
 use crate::config::MlConfig;
 use crate::lm::{iterate, LmOutcome, LmSettings, Work};
 use crate::stats::chi2_upper_tail;
-use crate::steps::{ModeTest, StructureChange, StructureStep};
 use crate::varpro::{Eval, Layout, Problem};
 use crate::C64;
+use frf_data::structure::{ModeTest, StructureChange, StructureStep};
 use realize::FrfModel;
 use std::f64::consts::TAU;
 

@@ -24,7 +24,7 @@ pub use first_fit::{
 };
 pub(crate) use summarize::{
     build_summary, distortion_summary, error_stats, information_uncertainty,
-    information_uncertainty_and_response_std, ml_structure_steps, ml_uncertainty, response_std,
+    information_uncertainty_and_response_std, ml_uncertainty, response_std, structure_steps,
     RunRecord,
 };
 pub use summarize::{final_model_summary, model_response_std_at};

@@ -338,8 +338,8 @@ pub(crate) struct RunRecord<'a> {
     pub timings: Vec<StageTime>,
     /// The estimator chain of the first fit.
     pub chain: Vec<String>,
-    /// The structure steps of the first fit's ML link ([`ml_structure_steps`]).
-    pub refinement_steps: Vec<ml_refine::StructureStep>,
+    /// The structure steps of the first fit's refiners ([`structure_steps`]).
+    pub structure_steps: Vec<crate::summary::StructureStepSummary>,
     /// Every chain tried by a multi-initialiser first fit.
     pub chain_runs: Vec<crate::chain::ChainRun>,
     /// The refiner's uncertainty of the final model, when it has one.
@@ -356,16 +356,32 @@ pub(crate) fn ml_uncertainty(links: &[frf_data::LinkReport]) -> Option<Uncertain
     Some(uncertainty_summary(ML_METHOD, r))
 }
 
-/// The structure steps of the last ML link of `links` (the refinement whose model the
-/// chain returned); empty without one.
-pub(crate) fn ml_structure_steps(links: &[frf_data::LinkReport]) -> Vec<ml_refine::StructureStep> {
-    links
+/// The structure steps of the first fit's refiners: the refined-IV structure
+/// adaptation's (`adapt`, from the fitter's report) and those of the last ML link of
+/// `links` (the refinement whose model the chain returned), in that order.
+pub(crate) fn structure_steps(
+    adapt: Option<&additive_riv::structure::AdaptReport>,
+    links: &[frf_data::LinkReport],
+) -> Vec<crate::summary::StructureStepSummary> {
+    let tagged = |link: &str, steps: &[frf_data::structure::StructureStep]| {
+        steps
+            .iter()
+            .map(|step| crate::summary::StructureStepSummary {
+                link: link.to_string(),
+                step: step.clone(),
+            })
+            .collect::<Vec<_>>()
+    };
+    let mut out = adapt.map_or_else(Vec::new, |a| tagged("riv", &a.steps));
+    if let Some(r) = links
         .iter()
         .rev()
         .find(|l| l.link == "ml")
         .and_then(|l| l.details_as::<ml_refine::MlReport>())
-        .map(|r| r.structure_steps.clone())
-        .unwrap_or_default()
+    {
+        out.extend(tagged("ml", &r.structure_steps));
+    }
+    out
 }
 
 /// [`UncertaintySummary::method`] of the ML refiner's covariance at its own optimum.
@@ -550,7 +566,7 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
             declared: ctx.declared_list.clone(),
             restart: run.restart,
             repairs: repair_summaries(run.fitter_report.repair.as_ref()),
-            refinement_steps: run.refinement_steps,
+            structure_steps: run.structure_steps,
             from_fit: run.from_fit,
         },
         steps: run.steps,

@@ -30,8 +30,8 @@ use crate::diagnose::{
 };
 use crate::pipeline::{
     build_summary, cmif_once, distortion_summary, err, error_stats, first_fit,
-    information_uncertainty, information_uncertainty_and_response_std, ml_structure_steps,
-    ml_uncertainty, response_std, FirstFit, FitContext, PipelineConfig, RunRecord, Timings,
+    information_uncertainty, information_uncertainty_and_response_std, ml_uncertainty,
+    response_std, structure_steps, FirstFit, FitContext, PipelineConfig, RunRecord, Timings,
 };
 use crate::summary::{StageTime, Summary};
 use crate::FrfitError;
@@ -497,7 +497,7 @@ pub fn run(
             final_errors,
             timings: timings.0,
             chain: first_chain.clone(),
-            refinement_steps: ml_structure_steps(&first_links),
+            structure_steps: structure_steps(fitter_report.adapt.as_ref(), &first_links),
             chain_runs: first_chain_runs,
             from_fit,
             uncertainty,

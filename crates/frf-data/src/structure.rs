@@ -1,8 +1,10 @@
-//! The refinement's changes to the model's structure, typed: what [`crate::MlRefine`]
-//! added, dropped, freed or held, whether it took the change, and the weighted cost
+//! A refiner's changes to the model's structure, typed: what a refinement added,
+//! dropped, freed or held, whether it took the change, and the weighted cost
 //! `sum w |G - P|^2` before and after (issue 42: a change to the model is a step the
 //! summary and the report can show, not only a line of the messages, which say the same
-//! in words). Carried in [`crate::MlReport::structure_steps`].
+//! in words). The ML refiner (`ml_refine::MlReport::structure_steps`) and the refined-IV
+//! structure adaptation (`additive_riv::structure::AdaptReport::steps`) both report
+//! them; the summary carries the first fit's as `initial.structure_steps`.
 
 use serde::{Deserialize, Serialize};
 
@@ -12,7 +14,7 @@ use serde::{Deserialize, Serialize};
 pub enum ModeTest {
     /// The refinement added it ([`StructureChange::ModesAdded`]).
     Added,
-    /// It shares its resonance with another mode ([`frf_data::twins`]).
+    /// It shares its resonance with another mode ([`crate::twins`]).
     Twin,
     /// Its half-power bandwidth is narrower than the line spacing around it.
     Narrow,
@@ -136,6 +138,6 @@ pub struct StructureStep {
     /// The F statistic of the test (the cost the larger structure explains per pair of
     /// parameters over its noise scale), when one was made.
     pub f_statistic: Option<f64>,
-    /// The floor the F statistic was held against ([`crate::MlConfig::min_f`]).
+    /// The critical value or floor the F statistic was held against.
     pub f_critical: Option<f64>,
 }
