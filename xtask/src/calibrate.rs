@@ -226,6 +226,10 @@ pub fn run(a: Args) -> Result<(), Error> {
     Ok(())
 }
 
+/// A fitted mode no true mode took: frequency (Hz), damping, frequency standard
+/// deviation (Hz).
+type UntakenMode = (f64, f64, f64);
+
 /// What the draws of one plant gave.
 #[derive(Default)]
 struct Tally {
@@ -235,8 +239,8 @@ struct Tally {
     missed: usize,
     spurious: usize,
     /// The draws with fitted modes beyond the truth's count: the draw, and the fitted
-    /// modes no true mode took (frequency Hz, damping, frequency standard deviation).
-    spurious_draws: Vec<(usize, Vec<(f64, f64, f64)>)>,
+    /// modes no true mode took.
+    spurious_draws: Vec<(usize, Vec<UntakenMode>)>,
     no_std: usize,
 }
 
