@@ -129,6 +129,7 @@ fn removal_step(removed: &[(f64, String)], before: f64, after: f64) -> Structure
         cost_after: Some(after),
         f_statistic: None,
         f_critical: None,
+        held_out: None,
     }
 }
 
@@ -423,6 +424,7 @@ pub fn adapt_modes(
                     cost_after: None,
                     f_statistic: None,
                     f_critical: None,
+                    held_out: None,
                 });
                 report.dropped.push((
                     f64::NAN,
@@ -453,6 +455,7 @@ pub fn adapt_modes(
             cost_after: Some(cost_of(&refit.model, data)),
             f_statistic: None,
             f_critical: None,
+            held_out: None,
         });
         let mut removed_added: Vec<(f64, String)> = Vec::new();
         if !added.is_empty() {

@@ -140,4 +140,43 @@ pub struct StructureStep {
     pub f_statistic: Option<f64>,
     /// The critical value or floor the F statistic was held against.
     pub f_critical: Option<f64>,
+    /// The weighted cost on lines the structures were not fitted to, without and with
+    /// the change, when that test was made ([`HeldOutCost`]); absent in files written
+    /// before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<HeldOutCost>,
+}
+
+/// The held-out test of a structure step: the lines split into the even and the odd
+/// ones, the structure without and with the change each refined on one half and its
+/// weighted cost taken on the other, the halves swapped, and the two costs summed. A
+/// change the data hold lowers the error on lines it was not fitted to; parameters that
+/// only follow the noise of the fitted lines raise it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutCost {
+    /// Without the change.
+    pub before: f64,
+    /// With it.
+    pub after: f64,
+    /// The held-out F statistic ([`HeldOutCost::f_of`]), when it was formed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub f_statistic: Option<f64>,
+}
+
+impl HeldOutCost {
+    /// Whether the change lowers the error on the held-out lines.
+    pub fn lowers(&self) -> bool {
+        self.after < self.before
+    }
+
+    /// The F statistic of the held-out costs: the decrease per pair of the
+    /// `added_params` real parameters the change adds, over the noise scale of the
+    /// held-out residual with the change (`after` over the `observations` complex
+    /// observations held out, each once). A disturbance that neither structure predicts
+    /// (a spike on one line) stays in that scale, so a change that lowers the held-out
+    /// cost by about what chance gives is not significant; a mode the data hold lowers it
+    /// by far more.
+    pub fn f_of(before: f64, after: f64, added_params: usize, observations: f64) -> f64 {
+        ((before - after) / (added_params.max(1) as f64 / 2.0)) / (after / observations)
+    }
 }

@@ -165,6 +165,7 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
                         cost_after: Some(2.5e6),
                         f_statistic: None,
                         f_critical: None,
+                        held_out: None,
                     },
                 },
                 StructureStepSummary {
@@ -178,6 +179,7 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
                         cost_after: Some(4.1e3),
                         f_statistic: Some(9.7e4),
                         f_critical: Some(25.0),
+                        held_out: None,
                     },
                 },
             ],

@@ -765,6 +765,7 @@ impl MlRefine {
                     cost_after: None,
                     f_statistic: None,
                     f_critical: None,
+                    held_out: None,
                 };
                 log.step(step, format!(
                     "the optimum had poles the data do not support ({}) after {} iterations ({}): dropped, and refined again from that optimum",
@@ -819,6 +820,7 @@ impl MlRefine {
                 cost_after: None,
                 f_statistic: None,
                 f_critical: None,
+                held_out: None,
             };
             log.step(step, format!(
                 "the delay is not determined by the data (information matrix condition {cond:.2e}; with complex residues and a feedthrough it trades with the residues' phases) after {} iterations ({}): held at {:.4} us and refined again; give it with --delay SECONDS if it is known",
@@ -855,6 +857,7 @@ impl MlRefine {
                     cost_after: None,
                     f_statistic: None,
                     f_critical: None,
+                    held_out: None,
                 };
                 log.step(step, format!(
                     "{what} is not determined by the data (information matrix condition {cond:.2e}) after {} iterations ({}): dropped, and refined again from that optimum",
@@ -1061,6 +1064,7 @@ fn without_weak_real_pole(
         cost_after: Some(cost_without),
         f_statistic: Some(f),
         f_critical: Some(min_f),
+        held_out: None,
     };
     log.step(step, format!(
         "start real pole at {pole:.3e} rad/s explains {f:.2} times the noise per parameter (< {min_f}): dropped before the iterations"

@@ -11,7 +11,7 @@ use crate::lm::{iterate, LmOutcome, LmSettings, Work};
 use crate::stats::chi2_upper_tail;
 use crate::varpro::{Eval, Layout, Problem};
 use crate::C64;
-use frf_data::structure::{ModeTest, StructureChange, StructureStep};
+use frf_data::structure::{HeldOutCost, ModeTest, StructureChange, StructureStep};
 use realize::FrfModel;
 use std::f64::consts::TAU;
 
@@ -330,7 +330,85 @@ fn added_step(
         cost_after: Some(next.out.eval.cost),
         f_statistic: Some(f_stat),
         f_critical: Some(min_f),
+        held_out: None,
     }
+}
+
+/// `, held-out cost B -> A (F = ...)` when the held-out test `h` was made.
+fn held_out_words(h: Option<HeldOutCost>) -> String {
+    h.map_or(String::new(), |h| {
+        format!(
+            ", held-out cost {:.4e} -> {:.4e} (F = {:.1})",
+            h.before,
+            h.after,
+            h.f_statistic.unwrap_or(f64::NAN)
+        )
+    })
+}
+
+/// The held-out test ([`HeldOutCost`]) of the step from the optimum `before` to the
+/// optimum `after` (structures of the same data): the lines split into the even and the
+/// odd ones, each structure refined on one half from its optimum (quietly, the same
+/// settings) and its weighted cost taken on the other half with its linear parameters
+/// as refined (not refitted there), then the halves swapped; the two costs of each
+/// structure summed. An added mode that the data hold lowers the error on the lines it
+/// was not fitted to; one that follows the noise of the fitted lines raises it. `None`
+/// when the band has too few lines to split or a half cannot carry a structure.
+fn held_out(s: &Setting, before: &Current, after: &Current) -> Option<HeldOutCost> {
+    use rayon::prelude::*;
+    let n = s.n;
+    if n < 8 {
+        return None;
+    }
+    let halves: [Vec<usize>; 2] = [(0..n).step_by(2).collect(), (1..n).step_by(2).collect()];
+    let quiet = MlConfig {
+        progress: frf_data::ProgressSink::none(),
+        ..s.cfg.clone()
+    };
+    let jobs = [(0usize, false), (0, true), (1, false), (1, true)];
+    let costs: Vec<Option<(bool, f64)>> = jobs
+        .par_iter()
+        .map(|&(fold, is_after)| {
+            let c = if is_after { after } else { before };
+            let (fit_on, test_on) = (&halves[fold], &halves[1 - fold]);
+            let hs = Setting::new(&quiet, fit_on.len(), s.m, s.measured, s.w_top);
+            if 2 * fit_on.len() * s.m <= c.n_params {
+                return None;
+            }
+            let p_fit = c.prob.on_lines(fit_on);
+            let ev = p_fit.evaluate(&c.out.theta).ok()?;
+            let out = hs.refine(&p_fit, c.out.theta.clone(), ev, c.n_params, &c.lay);
+            let fm = p_fit.model(&out.theta, &out.eval.coef);
+            let cost = c.prob.on_lines(test_on).cost_of_model(&fm)?;
+            Some((is_after, cost))
+        })
+        .collect();
+    let mut h = HeldOutCost {
+        before: 0.0,
+        after: 0.0,
+        f_statistic: None,
+    };
+    for c in costs {
+        let (is_after, cost) = c?;
+        if is_after {
+            h.after += cost;
+        } else {
+            h.before += cost;
+        }
+    }
+    h.f_statistic = Some(HeldOutCost::f_of(
+        h.before,
+        h.after,
+        after.n_params.saturating_sub(before.n_params),
+        s.observations(),
+    ));
+    Some(h)
+}
+
+/// Whether a held-out test `h` (when one was made) lets a structure step pass: its F
+/// statistic above `min_f`, the floor of the step's own F test.
+fn held_out_passes(h: Option<HeldOutCost>, min_f: f64) -> bool {
+    h.is_none_or(|h| h.f_statistic.is_some_and(|f| f > min_f))
 }
 
 /// The modes at the frequencies `new_f` (Hz, damping 0.01) added to the optimum `cur`
@@ -416,15 +494,22 @@ pub(crate) fn add_missed_modes(
         if peaks.len() > 1 {
             if let Some((next, f_stat)) = with_modes_at(s, cur, model, &peaks) {
                 *work = work.add(next.out.work);
-                if passes(&next.out, f_stat) {
-                    tried = Some((peaks.clone(), next, f_stat));
-                } else {
-                    log.step(added_step(cur, &next, &peaks, f_stat, cfg.min_f, false), format!(
-                        "modes added together at {} Hz (the residual's peaks) did not all hold (F = {:.1}, {}): the strongest alone is tried",
-                        peaks.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
-                        f_stat,
-                        next.out.convergence.describe()
-                    ));
+                let held = passes(&next.out, f_stat).then(|| held_out(s, cur, &next));
+                match held {
+                    Some(h) if held_out_passes(h, cfg.min_f) => {
+                        tried = Some((peaks.clone(), next, f_stat, h));
+                    }
+                    _ => {
+                        let mut step = added_step(cur, &next, &peaks, f_stat, cfg.min_f, false);
+                        step.held_out = held.flatten();
+                        log.step(step, format!(
+                            "modes added together at {} Hz (the residual's peaks) did not all hold (F = {:.1}, {}{}): the strongest alone is tried",
+                            peaks.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
+                            f_stat,
+                            next.out.convergence.describe(),
+                            held_out_words(held.flatten())
+                        ));
+                    }
                 }
             }
         }
@@ -433,37 +518,49 @@ pub(crate) fn add_missed_modes(
                 break;
             };
             *work = work.add(next.out.work);
-            if !passes(&next.out, f_stat) {
-                let step = added_step(cur, &next, &peaks[..1], f_stat, cfg.min_f, false);
-                log.step(step, if next.out.convergence.is_converged() {
-                    format!(
-                        "a mode added at {:.2} Hz (the residual's peak) did not explain more than noise (F = {:.1}): not kept",
-                        peaks[0], f_stat
-                    )
-                } else {
-                    format!(
-                        "a mode added at {:.2} Hz (the residual's peak) did not converge (F = {:.1}, {}): not kept",
-                        peaks[0],
-                        f_stat,
-                        next.out.convergence.describe()
-                    )
-                });
-                break;
-            }
-            tried = Some((peaks[..1].to_vec(), next, f_stat));
+            let held = passes(&next.out, f_stat).then(|| held_out(s, cur, &next));
+            let h = match held {
+                Some(h) if held_out_passes(h, cfg.min_f) => h,
+                _ => {
+                    let mut step = added_step(cur, &next, &peaks[..1], f_stat, cfg.min_f, false);
+                    step.held_out = held.flatten();
+                    log.step(step, if let Some(Some(h)) = held {
+                        format!(
+                            "a mode added at {:.2} Hz (the residual's peak) explains F = {:.1} on the lines it was fitted to but not on the lines it was not (held-out cost {:.4e} -> {:.4e}, F = {:.2} <= {}): not kept",
+                            peaks[0], f_stat, h.before, h.after, h.f_statistic.unwrap_or(f64::NAN), cfg.min_f
+                        )
+                    } else if next.out.convergence.is_converged() {
+                        format!(
+                            "a mode added at {:.2} Hz (the residual's peak) did not explain more than noise (F = {:.1}): not kept",
+                            peaks[0], f_stat
+                        )
+                    } else {
+                        format!(
+                            "a mode added at {:.2} Hz (the residual's peak) did not converge (F = {:.1}, {}): not kept",
+                            peaks[0],
+                            f_stat,
+                            next.out.convergence.describe()
+                        )
+                    });
+                    break;
+                }
+            };
+            tried = Some((peaks[..1].to_vec(), next, f_stat, h));
         }
-        let Some((new_f, next, f_stat)) = tried else {
+        let Some((new_f, next, f_stat, h)) = tried else {
             break;
         };
-        let step = added_step(cur, &next, &new_f, f_stat, cfg.min_f, true);
+        let mut step = added_step(cur, &next, &new_f, f_stat, cfg.min_f, true);
+        step.held_out = h;
         log.step(step, format!(
-            "{} added at {} Hz (the residual's {}; the start missed {}): cost {:.4e} -> {:.4e}, F = {f_stat:.1}",
+            "{} added at {} Hz (the residual's {}; the start missed {}): cost {:.4e} -> {:.4e}, F = {f_stat:.1}{}",
             if new_f.len() == 1 { "mode" } else { "modes" },
             new_f.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
             if new_f.len() == 1 { "peak" } else { "peaks" },
             if new_f.len() == 1 { "it" } else { "them" },
             cur.out.eval.cost,
-            next.out.eval.cost
+            next.out.eval.cost,
+            held_out_words(h).replacen(',', ";", 1)
         ));
         added.extend(new_f);
         // the addition's work is counted above
@@ -547,6 +644,7 @@ pub(crate) fn free_held_delay(
         cost_after: Some(cost_after),
         f_statistic: Some(f_stat),
         f_critical: Some(s.cfg.min_f),
+        held_out: None,
     };
     match score {
         Some((_, linearised, f_stat)) if f_stat.is_nan() || f_stat <= s.cfg.min_f => {
@@ -692,6 +790,7 @@ fn drop_integrators(
         cost_after: Some(out_d.eval.cost),
         f_statistic: Some(f_refined),
         f_critical: Some(cfg.min_f),
+        held_out: None,
     };
     if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
         return Some(IntegratorStep {
@@ -841,6 +940,7 @@ fn retest_mode(
         cost_after: Some(out_d.eval.cost),
         f_statistic: Some(f_refined),
         f_critical: Some(cfg.min_f),
+        held_out: None,
     };
     if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
         return Some(ModeRetest {

@@ -719,6 +719,39 @@ impl Problem {
         self.response_variance_on(Some(at), theta, ev, cov, entries)
     }
 
+    /// The same structure and template on some of this problem's lines (`lines`: their
+    /// indices, increasing), with their data and weights: one half of the held-out test
+    /// of a structure step.
+    pub fn on_lines(&self, lines: &[usize]) -> Problem {
+        let m = self.lay.m();
+        let omega: Vec<f64> = lines.iter().map(|&k| self.omega[k]).collect();
+        let g: Vec<C64> = lines
+            .iter()
+            .flat_map(|&k| self.g[k * m..(k + 1) * m].iter().copied())
+            .collect();
+        let sw: Vec<f64> = lines
+            .iter()
+            .flat_map(|&k| self.sw[k * m..(k + 1) * m].iter().copied())
+            .collect();
+        Problem::new(self.lay.clone(), omega, g, sw, self.template.clone())
+    }
+
+    /// The weighted cost `sum w |G - P|^2` of the model `fm` on this problem's lines,
+    /// its linear parameters as they are (not refitted to these data, as
+    /// [`Problem::evaluate`] does): the error of a model on lines it was not fitted to.
+    /// `None` when its response cannot be evaluated.
+    pub fn cost_of_model(&self, fm: &FrfModel) -> Option<f64> {
+        let resp = fm.freq_response(&self.omega).ok()?;
+        let c: f64 = self
+            .g
+            .iter()
+            .zip(&resp.values)
+            .zip(self.sw.iter())
+            .map(|((g, p), sw)| 0.5 * sw * sw * (g - p).norm_sqr())
+            .sum();
+        c.is_finite().then_some(c)
+    }
+
     /// This problem's layout and template at the lines `omega` (rad/s), with unit
     /// weights and no data: the rows at which [`Problem::response_variance_at`]
     /// evaluates the response's variance.
