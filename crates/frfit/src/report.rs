@@ -341,13 +341,13 @@ fn structure_steps_table(md: &mut String, steps: &[crate::summary::StructureStep
     }
     let _ = writeln!(
         md,
-        "**Structure steps of the first fit's refiners** (part of the first fit; the weighted cost `sum w |G - P|^2` of the structure tested from, and of the trial):\n"
+        "**Structure steps of the first fit's refiners** (part of the first fit; the weighted cost `sum w |G - P|^2` of the structure tested from and of the trial, and where it was tested, the cost on lines the structures were not fitted to, without and with the change):\n"
     );
     let _ = writeln!(
         md,
-        "| # | link | change | taken | cost before | cost after | F (critical) |"
+        "| # | link | change | taken | cost before | cost after | F (critical) | held-out cost (F) |"
     );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
     for (i, s) in steps.iter().enumerate() {
         let st = &s.step;
         let f = match (st.f_statistic, st.f_critical) {
@@ -357,7 +357,7 @@ fn structure_steps_table(md: &mut String, steps: &[crate::summary::StructureStep
         };
         let _ = writeln!(
             md,
-            "| {} | {} | `{}`: {} | {} | {} | {} | {f} |",
+            "| {} | {} | `{}`: {} | {} | {} | {} | {f} | {} |",
             i + 1,
             s.link,
             st.change.name(),
@@ -365,6 +365,13 @@ fn structure_steps_table(md: &mut String, steps: &[crate::summary::StructureStep
             if st.accepted { "yes" } else { "no" },
             fmt_num(st.cost_before),
             st.cost_after.map_or("-".into(), fmt_num),
+            st.held_out.map_or("-".into(), |h| format!(
+                "{} -> {}{}",
+                fmt_num(h.before),
+                fmt_num(h.after),
+                h.f_statistic
+                    .map_or(String::new(), |f| format!(" ({})", fmt_num(f)))
+            )),
         );
     }
     md.push('\n');

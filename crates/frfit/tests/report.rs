@@ -179,7 +179,11 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
                         cost_after: Some(4.1e3),
                         f_statistic: Some(9.7e4),
                         f_critical: Some(25.0),
-                        held_out: None,
+                        held_out: Some(frf_data::structure::HeldOutCost {
+                            before: 2.6e6,
+                            after: 4.3e3,
+                            f_statistic: Some(8.8e4),
+                        }),
                     },
                 },
             ],
@@ -394,12 +398,12 @@ fn full_report_with_steps_and_variance() {
     assert_eq!(table_rows(&md, "| # | link | change"), 2);
     assert!(
         md.contains(
-            "| 2 | ml | `modes_added`: mode at 121.00 Hz | yes | 2.5e6 | 4100 | 97000 (25) |"
+            "| 2 | ml | `modes_added`: mode at 121.00 Hz | yes | 2.5e6 | 4100 | 97000 (25) | 2.6e6 -> 4300 (88000) |"
         ),
         "{md}"
     );
     assert!(
-        md.contains("| 1 | riv | `poles_dropped`: mode at 410.00 Hz: insignificant (F = 1.2 < 9.1) (the structure adaptation's checks) | yes | 2.49e6 | 2.5e6 | - |"),
+        md.contains("| 1 | riv | `poles_dropped`: mode at 410.00 Hz: insignificant (F = 1.2 < 9.1) (the structure adaptation's checks) | yes | 2.49e6 | 2.5e6 | - | - |"),
         "{md}"
     );
     assert!(md.contains("**Verdict: noise-limited.**"));
