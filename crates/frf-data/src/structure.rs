@@ -147,6 +147,43 @@ pub struct StructureStep {
     pub held_out: Option<HeldOutCost>,
 }
 
+impl StructureStep {
+    /// A change the refinement made without a test (poles the data do not support
+    /// dropped, a delay they do not determine held), from an optimum of cost
+    /// `cost_before`.
+    pub fn forced(change: StructureChange, cost_before: f64) -> Self {
+        Self {
+            change,
+            accepted: true,
+            cost_before,
+            cost_after: None,
+            f_statistic: None,
+            f_critical: None,
+            held_out: None,
+        }
+    }
+
+    /// A change tested by a trial structure: taken or not (`accepted`), the cost from
+    /// `cost_before` to the trial's `cost_after`, and the F statistic `f` against
+    /// `f_critical`.
+    pub fn tested(
+        change: StructureChange,
+        accepted: bool,
+        (cost_before, cost_after): (f64, f64),
+        (f, f_critical): (f64, f64),
+    ) -> Self {
+        Self {
+            change,
+            accepted,
+            cost_before,
+            cost_after: Some(cost_after),
+            f_statistic: Some(f),
+            f_critical: Some(f_critical),
+            held_out: None,
+        }
+    }
+}
+
 /// The held-out test of a structure step: the lines split into the even and the odd
 /// ones, the structure without and with the change each refined on one half and its
 /// weighted cost taken on the other, the halves swapped, and the two costs summed. A

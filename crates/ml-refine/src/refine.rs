@@ -755,18 +755,13 @@ impl MlRefine {
         if !unsupported.is_empty() && drops < drop_limit && dynamics_stable {
             let next = unsupported.dropped_from(&fitted);
             if next.modal.pairs.len() + next.modal.real_poles.len() + next.modal.rigid.len() > 0 {
-                let step = StructureStep {
-                    change: StructureChange::PolesDropped {
+                let step = StructureStep::forced(
+                    StructureChange::PolesDropped {
                         poles: unsupported.all(),
                         reason: "the data do not support them".into(),
                     },
-                    accepted: true,
-                    cost_before: out.eval.cost,
-                    cost_after: None,
-                    f_statistic: None,
-                    f_critical: None,
-                    held_out: None,
-                };
+                    out.eval.cost,
+                );
                 log.step(step, format!(
                     "the optimum had poles the data do not support ({}) after {} iterations ({}): dropped, and refined again from that optimum",
                     unsupported.all().join(", "),
@@ -811,17 +806,12 @@ impl MlRefine {
             // modes and relative noise 1e-6: condition 8.9e16); held where it is
             let mut next = fitted.clone();
             next.factors.delay_fitted = false;
-            let step = StructureStep {
-                change: StructureChange::DelayHeld {
+            let step = StructureStep::forced(
+                StructureChange::DelayHeld {
                     delay_s: fitted.factors.delay_s,
                 },
-                accepted: true,
-                cost_before: out.eval.cost,
-                cost_after: None,
-                f_statistic: None,
-                f_critical: None,
-                held_out: None,
-            };
+                out.eval.cost,
+            );
             log.step(step, format!(
                 "the delay is not determined by the data (information matrix condition {cond:.2e}; with complex residues and a feedthrough it trades with the residues' phases) after {} iterations ({}): held at {:.4} us and refined again; give it with --delay SECONDS if it is known",
                 out.iterations,
@@ -845,20 +835,15 @@ impl MlRefine {
                 next.modal.real_poles.remove(weakest - 2 * np);
             }
             if next.modal.pairs.len() + next.modal.real_poles.len() + next.modal.rigid.len() > 0 {
-                let step = StructureStep {
-                    change: StructureChange::PolesDropped {
+                let step = StructureStep::forced(
+                    StructureChange::PolesDropped {
                         poles: vec![what.clone()],
                         reason: format!(
                             "not determined by the data: information matrix condition {cond:.2e}"
                         ),
                     },
-                    accepted: true,
-                    cost_before: out.eval.cost,
-                    cost_after: None,
-                    f_statistic: None,
-                    f_critical: None,
-                    held_out: None,
-                };
+                    out.eval.cost,
+                );
                 log.step(step, format!(
                     "{what} is not determined by the data (information matrix condition {cond:.2e}) after {} iterations ({}): dropped, and refined again from that optimum",
                     out.iterations,
@@ -1054,18 +1039,15 @@ fn without_weak_real_pole(
     if m2.modal.pairs.len() + m2.modal.real_poles.len() + m2.modal.rigid.len() == 0 {
         return None;
     }
-    let step = StructureStep {
-        change: StructureChange::PolesDropped {
+    let step = StructureStep::tested(
+        StructureChange::PolesDropped {
             poles: vec![format!("real pole at {pole:.3e} rad/s")],
             reason: "the start's real pole explains too little".into(),
         },
-        accepted: true,
-        cost_before: eval0.cost,
-        cost_after: Some(cost_without),
-        f_statistic: Some(f),
-        f_critical: Some(min_f),
-        held_out: None,
-    };
+        true,
+        (eval0.cost, cost_without),
+        (f, min_f),
+    );
     log.step(step, format!(
         "start real pole at {pole:.3e} rad/s explains {f:.2} times the noise per parameter (< {min_f}): dropped before the iterations"
     ));

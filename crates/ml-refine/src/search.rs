@@ -321,17 +321,14 @@ fn added_step(
     min_f: f64,
     accepted: bool,
 ) -> StructureStep {
-    StructureStep {
-        change: StructureChange::ModesAdded {
+    StructureStep::tested(
+        StructureChange::ModesAdded {
             start_hz: start_hz.to_vec(),
         },
         accepted,
-        cost_before: cur.out.eval.cost,
-        cost_after: Some(next.out.eval.cost),
-        f_statistic: Some(f_stat),
-        f_critical: Some(min_f),
-        held_out: None,
-    }
+        (cur.out.eval.cost, next.out.eval.cost),
+        (f_stat, min_f),
+    )
 }
 
 /// `, held-out cost B -> A (F = ...)` when the held-out test `h` was made.
@@ -635,16 +632,15 @@ pub(crate) fn free_held_delay(
         let f_stat = s.nested_f((ev.cost, cur.n_params), (linearised, n_params_f));
         (ev, linearised, f_stat)
     });
-    let step = |accepted: bool, cost_after: f64, f_stat: f64| StructureStep {
-        change: StructureChange::DelayFreed {
-            held_s: model.factors.delay_s,
-        },
-        accepted,
-        cost_before: cur.out.eval.cost,
-        cost_after: Some(cost_after),
-        f_statistic: Some(f_stat),
-        f_critical: Some(s.cfg.min_f),
-        held_out: None,
+    let step = |accepted: bool, cost_after: f64, f_stat: f64| {
+        StructureStep::tested(
+            StructureChange::DelayFreed {
+                held_s: model.factors.delay_s,
+            },
+            accepted,
+            (cur.out.eval.cost, cost_after),
+            (f_stat, s.cfg.min_f),
+        )
     };
     match score {
         Some((_, linearised, f_stat)) if f_stat.is_nan() || f_stat <= s.cfg.min_f => {
@@ -783,14 +779,13 @@ fn drop_integrators(
     };
     let out_d = s.refine(&prob_d, out.theta.clone(), ev_d, n_params_d, &lay_d);
     let f_refined = f_of(out_d.eval.cost);
-    let step = |accepted: bool| StructureStep {
-        change: StructureChange::IntegratorsDropped { keep, of: k },
-        accepted,
-        cost_before: out.eval.cost,
-        cost_after: Some(out_d.eval.cost),
-        f_statistic: Some(f_refined),
-        f_critical: Some(cfg.min_f),
-        held_out: None,
+    let step = |accepted: bool| {
+        StructureStep::tested(
+            StructureChange::IntegratorsDropped { keep, of: k },
+            accepted,
+            (out.eval.cost, out_d.eval.cost),
+            (f_refined, cfg.min_f),
+        )
     };
     if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
         return Some(IntegratorStep {
@@ -923,24 +918,23 @@ fn retest_mode(
     let f_hz = pole(q).norm() / TAU;
     let out_d = s.refine(&prob_d, theta_d, ev_d, n_params_d, &lay_d);
     let f_refined = f_of(out_d.eval.cost);
-    let step = |accepted: bool| StructureStep {
-        change: StructureChange::ModeDropped {
-            f_hz,
-            zeta: -pole(q).re / pole(q).norm(),
-            tested_as: if q >= first_added {
-                ModeTest::Added
-            } else if suspect {
-                ModeTest::Twin
-            } else {
-                ModeTest::Narrow
+    let step = |accepted: bool| {
+        StructureStep::tested(
+            StructureChange::ModeDropped {
+                f_hz,
+                zeta: -pole(q).re / pole(q).norm(),
+                tested_as: if q >= first_added {
+                    ModeTest::Added
+                } else if suspect {
+                    ModeTest::Twin
+                } else {
+                    ModeTest::Narrow
+                },
             },
-        },
-        accepted,
-        cost_before: out.eval.cost,
-        cost_after: Some(out_d.eval.cost),
-        f_statistic: Some(f_refined),
-        f_critical: Some(cfg.min_f),
-        held_out: None,
+            accepted,
+            (out.eval.cost, out_d.eval.cost),
+            (f_refined, cfg.min_f),
+        )
     };
     if !out_d.convergence.is_converged() || f_refined >= cfg.min_f {
         return Some(ModeRetest {
