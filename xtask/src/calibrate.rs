@@ -75,6 +75,12 @@ pub struct Args {
     /// with `frfit fit` and its messages read.
     #[arg(long, value_name = "DIR")]
     pub save_data: Option<std::path::PathBuf>,
+    /// `wafer` only: each draw simulates another plate (plate seed `seed + draw`), each
+    /// against its own truth, instead of new noise on one plate: the intervals' spread
+    /// over plates, and the modes beyond each plate's own (the plates of `frfit simulate
+    /// wafer-stage --seed S`).
+    #[arg(long)]
+    pub vary_plate: bool,
 }
 
 /// Pooled z statistics.
@@ -313,23 +319,28 @@ impl Tally {
     }
 }
 
-/// The wafer-stage plant: one plate, a new closed-loop experiment per draw.
+/// The wafer-stage plant: a new closed-loop experiment per draw, of one plate or (with
+/// `--vary-plate`) of another plate each draw.
 fn wafer(a: &Args) -> Result<(), Error> {
     use experiment::nonparametric::{EstimatorConfig, LineGrid};
     use experiment::synth::{
         ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
         WaferStageExperiment,
     };
-    let stage = WaferStageConfig {
-        seed: a.seed,
-        ..WaferStageConfig::default()
-    };
     let (periods, realizations) = (10, 10);
     let mut tally = Tally::default();
-    let mut truth: Vec<(f64, f64)> = Vec::new();
-    let mut delay_truth = 0.0;
+    // the plates' true mode counts, fewest and most
+    let mut modes = (usize::MAX, 0);
     let t0 = Instant::now();
     for d in a.first_draw..a.first_draw + a.draws {
+        let stage = WaferStageConfig {
+            seed: if a.vary_plate {
+                a.seed.wrapping_add(d as u64)
+            } else {
+                a.seed
+            },
+            ..WaferStageConfig::default()
+        };
         let exp = ExperimentConfig {
             grid: LineGrid::odd(stage.fs, 40_000, 0.0, 2000.0).stage("grid")?,
             periods,
@@ -352,12 +363,11 @@ fn wafer(a: &Args) -> Result<(), Error> {
         };
         let w = WaferStageExperiment::new(&stage, &ControllerConfig::default(), exp)
             .stage("wafer stage")?;
-        if truth.is_empty() {
-            let t = w.stage.truth();
-            truth = t.model.modes.iter().map(|m| (m.f_hz, m.zeta)).collect();
-            // the fit's delay is the one beyond the exact hold's half sample
-            delay_truth = t.delay_s - 0.5 / w.stage.fs;
-        }
+        let t = w.stage.truth();
+        let truth: Vec<(f64, f64)> = t.model.modes.iter().map(|m| (m.f_hz, m.zeta)).collect();
+        // the fit's delay is the one beyond the exact hold's half sample
+        let delay_truth = t.delay_s - 0.5 / w.stage.fs;
+        modes = (modes.0.min(truth.len()), modes.1.max(truth.len()));
         let mut est = w
             .experiment
             .estimate(SimulationPath::FrequencyDomain, &EstimatorConfig::default())
@@ -382,9 +392,22 @@ fn wafer(a: &Args) -> Result<(), Error> {
     }
     eprintln!();
     println!(
-        "\nwafer plant (plate seed {}, 4x13, {} modes, nonparametric estimates of {periods} periods x {realizations} realizations, band 20..2000 Hz), `--refine {}`, {} draws in {:.1} s:\n",
-        a.seed,
-        truth.len(),
+        "\nwafer plant ({}, 4x13, {} modes, nonparametric estimates of {periods} periods x {realizations} realizations, band 20..2000 Hz), `--refine {}`, {} draws in {:.1} s:\n",
+        if a.vary_plate {
+            format!(
+                "plate seeds {}..{}, one per draw",
+                a.seed.wrapping_add(a.first_draw as u64),
+                a.seed
+                    .wrapping_add((a.first_draw + a.draws).saturating_sub(1) as u64)
+            )
+        } else {
+            format!("plate seed {}", a.seed)
+        },
+        if modes.0 == modes.1 {
+            modes.0.to_string()
+        } else {
+            format!("{}-{}", modes.0, modes.1)
+        },
         a.refine,
         a.draws,
         t0.elapsed().as_secs_f64()
