@@ -110,8 +110,8 @@ pub struct AdaptReport {
 /// each mode's frequency (Hz, NaN for real poles) and why; the cost from `before` to
 /// `after`.
 fn removal_step(removed: &[(f64, String)], before: f64, after: f64) -> StructureStep {
-    StructureStep {
-        change: StructureChange::PolesDropped {
+    StructureStep::untested(
+        StructureChange::PolesDropped {
             poles: removed
                 .iter()
                 .map(|(f, why)| {
@@ -124,13 +124,10 @@ fn removal_step(removed: &[(f64, String)], before: f64, after: f64) -> Structure
                 .collect(),
             reason: "the structure adaptation's checks".into(),
         },
-        accepted: true,
-        cost_before: before,
-        cost_after: Some(after),
-        f_statistic: None,
-        f_critical: None,
-        held_out: None,
-    }
+        true,
+        before,
+        Some(after),
+    )
 }
 
 /// Candidate frequencies (Hz) of missed modes: local maxima of the per-line weighted
@@ -356,9 +353,12 @@ pub fn adapt_modes(
         // 1. remove what does not belong
         let (dropped, _, kept_stats) = drop_pass(&mut model, data, cfg, &[])?;
         let mut changed = !dropped.is_empty();
+        let round_start = report.dropped.len();
         report
             .dropped
             .extend(dropped.iter().map(|(_, f, why)| (*f, why.clone())));
+        // the removals of this round's added modes follow in `report.dropped`
+        let additions_start = report.dropped.len();
         // 2. add modes at residual peaks
         let n_old = model.submodels.len();
         let (lo, hi) = data.band_hz;
@@ -370,13 +370,12 @@ pub fn adapt_modes(
             cost_of(&model, data)
         };
         if !dropped.is_empty() {
-            let removed: Vec<(f64, String)> = dropped
-                .iter()
-                .map(|(_, f, why)| (*f, why.clone()))
-                .collect();
-            report
-                .steps
-                .push(removal_step(&removed, previous_cost, cost_now));
+            let step = removal_step(
+                &report.dropped[round_start..additions_start],
+                previous_cost,
+                cost_now,
+            );
+            report.steps.push(step);
         }
         let exact = cost_now <= EXACT_FIT_REL * data.weighted_energy();
         let first_order = model_first_order(&model);
@@ -415,17 +414,14 @@ pub fn adapt_modes(
         let mut refit = match attempt {
             Ok(f) => f,
             Err(RivError::Numerical { why, .. }) => {
-                report.steps.push(StructureStep {
-                    change: StructureChange::ModesAdded {
+                report.steps.push(StructureStep::untested(
+                    StructureChange::ModesAdded {
                         start_hz: peak_at.clone(),
                     },
-                    accepted: false,
-                    cost_before: cost_now,
-                    cost_after: None,
-                    f_statistic: None,
-                    f_critical: None,
-                    held_out: None,
-                });
+                    false,
+                    cost_now,
+                    None,
+                ));
                 report.dropped.push((
                     f64::NAN,
                     format!(
@@ -446,18 +442,16 @@ pub fn adapt_modes(
         //    fitted to a broadband misfit only reshapes it)
         // the round's additions as a structure step (taken when one survives), and the
         // added modes its checks remove again
-        let mut added_step = (!added.is_empty()).then(|| StructureStep {
-            change: StructureChange::ModesAdded {
-                start_hz: peak_at.clone(),
-            },
-            accepted: false,
-            cost_before: cost_now,
-            cost_after: Some(cost_of(&refit.model, data)),
-            f_statistic: None,
-            f_critical: None,
-            held_out: None,
+        let mut added_step = (!added.is_empty()).then(|| {
+            StructureStep::untested(
+                StructureChange::ModesAdded {
+                    start_hz: peak_at.clone(),
+                },
+                false,
+                cost_now,
+                Some(cost_of(&refit.model, data)),
+            )
         });
-        let mut removed_added: Vec<(f64, String)> = Vec::new();
         if !added.is_empty() {
             let mut model = refit.model.clone();
             let after = ResidualStats::new(&model, data);
@@ -497,7 +491,6 @@ pub fn adapt_modes(
                 report
                     .dropped
                     .extend(local_reject.iter().map(|(_, f, why)| (*f, why.clone())));
-                removed_added.extend(local_reject.iter().map(|(_, f, why)| (*f, why.clone())));
             }
             let protect: Vec<usize> = (0..n_old).collect();
             let (dropped_new, stats, _) = drop_pass(&mut model, data, cfg, &protect)?;
@@ -517,7 +510,6 @@ pub fn adapt_modes(
             if let Some(st) = added_step.as_mut() {
                 st.accepted = survived;
             }
-            removed_added.extend(dropped_new.iter().map(|(_, f, why)| (*f, why.clone())));
             if !survived && dropped.is_empty() {
                 changed = false;
             }
@@ -537,13 +529,13 @@ pub fn adapt_modes(
             st.accepted &= !undone;
             report.steps.push(st);
         }
-        if !removed_added.is_empty() {
+        if report.dropped.len() > additions_start {
             let before = report
                 .steps
                 .last()
                 .and_then(|s| s.cost_after)
                 .unwrap_or(cost_now);
-            let mut st = removal_step(&removed_added, before, cost_end);
+            let mut st = removal_step(&report.dropped[additions_start..], before, cost_end);
             st.accepted = !undone;
             report.steps.push(st);
         }

@@ -152,11 +152,23 @@ impl StructureStep {
     /// dropped, a delay they do not determine held), from an optimum of cost
     /// `cost_before`.
     pub fn forced(change: StructureChange, cost_before: f64) -> Self {
+        Self::untested(change, true, cost_before, None)
+    }
+
+    /// A change judged by other checks than an F test of its own (the refined-IV
+    /// structure adaptation's per-mode tests): taken or not (`accepted`), the cost from
+    /// `cost_before` to `cost_after` when a trial was made.
+    pub fn untested(
+        change: StructureChange,
+        accepted: bool,
+        cost_before: f64,
+        cost_after: Option<f64>,
+    ) -> Self {
         Self {
             change,
-            accepted: true,
+            accepted,
             cost_before,
-            cost_after: None,
+            cost_after,
             f_statistic: None,
             f_critical: None,
             held_out: None,
@@ -204,6 +216,26 @@ impl HeldOutCost {
     /// Whether the change lowers the error on the held-out lines.
     pub fn lowers(&self) -> bool {
         self.after < self.before
+    }
+
+    /// The held-out costs summed over the folds: each fold's cost of the structure
+    /// without the change (`false`) or with it (`true`); `None` when a fold could not be
+    /// costed (the test is then not made). No F statistic yet.
+    pub fn from_folds(folds: impl IntoIterator<Item = Option<(bool, f64)>>) -> Option<Self> {
+        let mut h = Self {
+            before: 0.0,
+            after: 0.0,
+            f_statistic: None,
+        };
+        for fold in folds {
+            let (with_change, cost) = fold?;
+            if with_change {
+                h.after += cost;
+            } else {
+                h.before += cost;
+            }
+        }
+        Some(h)
     }
 
     /// The F statistic of the held-out costs: the decrease per pair of the

@@ -237,7 +237,7 @@ pub struct StepSummary {
     /// held-out lines without and with it (the round's best trial only; a step that
     /// raises it is not accepted).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub held_out: Option<HeldOutSummary>,
+    pub held_out: Option<frf_data::structure::HeldOutCost>,
 }
 
 impl StepSummary {
@@ -245,17 +245,6 @@ impl StepSummary {
     pub fn effect(&self) -> &'static str {
         self.fitted.name()
     }
-}
-
-/// A step's check on interleaved held-out lines: the model before and after the step,
-/// each refitted on the even lines and tested on the odd ones, then the reverse; the
-/// summed weighted costs on the held-out lines.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct HeldOutSummary {
-    /// Held-out cost without the step.
-    pub before: f64,
-    /// Held-out cost with it.
-    pub after: f64,
 }
 
 /// The final model, briefly.

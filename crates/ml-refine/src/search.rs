@@ -331,11 +331,11 @@ fn added_step(
     )
 }
 
-/// `, held-out cost B -> A (F = ...)` when the held-out test `h` was made.
-fn held_out_words(h: Option<HeldOutCost>) -> String {
+/// `{sep} held-out cost B -> A (F = ...)` when the held-out test `h` was made.
+fn held_out_words(h: Option<HeldOutCost>, sep: &str) -> String {
     h.map_or(String::new(), |h| {
         format!(
-            ", held-out cost {:.4e} -> {:.4e} (F = {:.1})",
+            "{sep} held-out cost {:.4e} -> {:.4e} (F = {:.1})",
             h.before,
             h.after,
             h.f_statistic.unwrap_or(f64::NAN)
@@ -357,7 +357,13 @@ fn held_out(s: &Setting, before: &Current, after: &Current) -> Option<HeldOutCos
     if n < 8 {
         return None;
     }
-    let halves: [Vec<usize>; 2] = [(0..n).step_by(2).collect(), (1..n).step_by(2).collect()];
+    let lines: [Vec<usize>; 2] = [(0..n).step_by(2).collect(), (1..n).step_by(2).collect()];
+    // the halves' data and weights, once: each structure takes them with its layout
+    // (`with_layout` shares them)
+    let halves = [
+        before.prob.on_lines(&lines[0]),
+        before.prob.on_lines(&lines[1]),
+    ];
     let quiet = MlConfig {
         progress: frf_data::ProgressSink::none(),
         ..s.cfg.clone()
@@ -368,31 +374,20 @@ fn held_out(s: &Setting, before: &Current, after: &Current) -> Option<HeldOutCos
         .map(|&(fold, is_after)| {
             let c = if is_after { after } else { before };
             let (fit_on, test_on) = (&halves[fold], &halves[1 - fold]);
-            let hs = Setting::new(&quiet, fit_on.len(), s.m, s.measured, s.w_top);
-            if 2 * fit_on.len() * s.m <= c.n_params {
+            let n_fit = fit_on.n_lines();
+            let hs = Setting::new(&quiet, n_fit, s.m, s.measured, s.w_top);
+            if 2 * n_fit * s.m <= c.n_params {
                 return None;
             }
-            let p_fit = c.prob.on_lines(fit_on);
+            let p_fit = fit_on.with_layout(c.lay.clone(), c.prob.template.clone());
             let ev = p_fit.evaluate(&c.out.theta).ok()?;
             let out = hs.refine(&p_fit, c.out.theta.clone(), ev, c.n_params, &c.lay);
             let fm = p_fit.model(&out.theta, &out.eval.coef);
-            let cost = c.prob.on_lines(test_on).cost_of_model(&fm)?;
+            let cost = test_on.cost_of_model(&fm)?;
             Some((is_after, cost))
         })
         .collect();
-    let mut h = HeldOutCost {
-        before: 0.0,
-        after: 0.0,
-        f_statistic: None,
-    };
-    for c in costs {
-        let (is_after, cost) = c?;
-        if is_after {
-            h.after += cost;
-        } else {
-            h.before += cost;
-        }
-    }
+    let mut h = HeldOutCost::from_folds(costs)?;
     h.f_statistic = Some(HeldOutCost::f_of(
         h.before,
         h.after,
@@ -504,7 +499,7 @@ pub(crate) fn add_missed_modes(
                             peaks.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(", "),
                             f_stat,
                             next.out.convergence.describe(),
-                            held_out_words(held.flatten())
+                            held_out_words(held.flatten(), ",")
                         ));
                     }
                 }
@@ -557,7 +552,7 @@ pub(crate) fn add_missed_modes(
             if new_f.len() == 1 { "it" } else { "them" },
             cur.out.eval.cost,
             next.out.eval.cost,
-            held_out_words(h).replacen(',', ";", 1)
+            held_out_words(h, ";")
         ));
         added.extend(new_f);
         // the addition's work is counted above

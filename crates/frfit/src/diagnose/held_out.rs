@@ -13,25 +13,10 @@
 
 use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::{AdditiveModel, FitData};
+use frf_data::structure::HeldOutCost;
 use rayon::prelude::*;
 
-/// The held-out weighted costs of a step, summed over the two folds.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HeldOut {
-    /// Without the step.
-    pub before: f64,
-    /// With it.
-    pub after: f64,
-}
-
-impl HeldOut {
-    /// Whether the step lowers the error on the held-out lines.
-    pub fn lowers(&self) -> bool {
-        self.after < self.before
-    }
-}
-
-/// The held-out costs of the step from `before` to `after` on the band split into
+/// The held-out costs of the step (summed over the two folds) from `before` to `after` on the band split into
 /// `halves` ([`crate::pipeline::interleave::halves`], made once by
 /// [`FitContext::held_out_halves`](crate::pipeline::FitContext::held_out_halves); see
 /// the module documentation), the refits by `riv`. `None` when the band has too few
@@ -41,7 +26,7 @@ pub fn held_out(
     riv: &RivConfig,
     before: &AdditiveModel,
     after: &AdditiveModel,
-) -> Option<HeldOut> {
+) -> Option<HeldOutCost> {
     if halves[0].n + halves[1].n < 8 {
         return None;
     }
@@ -56,17 +41,5 @@ pub fn held_out(
             c.is_finite().then_some((is_after, c))
         })
         .collect();
-    let mut out = HeldOut {
-        before: 0.0,
-        after: 0.0,
-    };
-    for c in costs {
-        let (is_after, c) = c?;
-        if is_after {
-            out.after += c;
-        } else {
-            out.before += c;
-        }
-    }
-    Some(out)
+    HeldOutCost::from_folds(costs)
 }

@@ -828,10 +828,7 @@ fn step_summaries(
         after,
         figure: None,
         superseded_by: None,
-        held_out: tr.held_out.map(|h| crate::summary::HeldOutSummary {
-            before: h.before,
-            after: h.after,
-        }),
+        held_out: tr.held_out,
     };
     if tr.joint_modes.is_empty() {
         return vec![step(&tr.params, tr.evidence.clone())];

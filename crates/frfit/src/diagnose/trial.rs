@@ -3,7 +3,6 @@
 //! start.
 
 use super::candidate::{Candidate, Proposal};
-use super::held_out::HeldOut;
 use super::refit::{
     f_test, lacked_light_modes, model_cost, new_modes, refit, unstable_parts, Refitted,
 };
@@ -14,6 +13,7 @@ use additive_riv::residual_stats::{local_energy, ResidualStats};
 use additive_riv::riv::{iterate, RivConfig};
 use additive_riv::structure::AdaptConfig;
 use additive_riv::{AdditiveModel, FitData};
+use frf_data::structure::HeldOutCost;
 use frf_data::ModelStructure;
 
 /// One tested candidate: the refitted model and its F test against the current model.
@@ -43,7 +43,7 @@ pub struct Trial {
     pub candidate: Option<Candidate>,
     /// Its check on interleaved held-out lines ([`super::held_out`]), when it was the
     /// round's best.
-    pub held_out: Option<HeldOut>,
+    pub held_out: Option<HeldOutCost>,
 }
 
 /// A candidate refit stopped at the screening cap ([`refit_candidate`] with `cap`).
