@@ -17,6 +17,7 @@
 mod bench_diagnose;
 mod bench_scale;
 mod calibrate;
+mod effects;
 mod fuzz;
 mod oomen_bosgra;
 mod validate;
@@ -59,6 +60,10 @@ enum Task {
     /// Monte Carlo calibration of the reported standard deviations: z RMS and coverage
     /// of the modes' frequency and damping over noise draws of a random plant.
     Calibrate(calibrate::Args),
+    /// The diagnosis on undeclared effects and pairs of them (a lag with a delay, a
+    /// crosstalk with a sensor-mount resonance, a hidden mode beside another, ...), their
+    /// values drawn per plate, each run against the plate's exact response.
+    Effects(effects::Args),
 }
 
 /// An error of a task: which stage failed and why.
@@ -108,6 +113,7 @@ fn main() -> ExitCode {
         Some(Task::BenchScale(args)) => bench_scale::run(args),
         Some(Task::BenchDiagnose(args)) => bench_diagnose::run(args),
         Some(Task::Calibrate(args)) => calibrate::run(args),
+        Some(Task::Effects(args)) => effects::run(args),
         None => {
             let mut cmd = Cli::command();
             match cmd.print_help() {
