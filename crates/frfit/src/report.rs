@@ -1267,7 +1267,7 @@ fn markdown(
              residual/noise {:.3}, median relative error {:.4}) ended at {} mode{}, residual/noise \
              {:.3}, median relative error {:.4} (accepted: {}), worse on the data than the model \
              `frfit fit` gives (residual/noise {:.3}, median relative error {:.4}). The diagnosis \
-             below ran again from that model; the initial model above is `fit`'s.\n",
+             below ran again from that model{}.\n",
             f.replaced_initial_modes,
             plural(f.replaced_initial_modes),
             f.replaced_initial_errors.residual_to_noise,
@@ -1283,6 +1283,13 @@ fn markdown(
             },
             f.fit_errors.residual_to_noise,
             f.fit_errors.median_rel,
+            if f.feedthrough_taken_out {
+                " with its feedthrough taken out and the rest refitted (the diagnosis's own \
+                 first fit held none: a feedthrough is a step of the loop, not a part of the \
+                 start); the initial model above is that model"
+            } else {
+                "; the initial model above is `fit`'s"
+            },
         );
     }
     if !s.initial.repairs.is_empty() {

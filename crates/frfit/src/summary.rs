@@ -163,6 +163,12 @@ pub struct FromFitSummary {
     pub replaced_final_errors: ErrorStats,
     /// The effects the replaced diagnosis accepted, in order.
     pub replaced_accepted: Vec<String>,
+    /// Whether the diagnosis ran from `fit`'s model with its feedthrough taken out (and
+    /// the rest refitted): a feedthrough the diagnosis's own first fit did not hold is a
+    /// step of the loop, with its errors before and after, not a part inherited from
+    /// `fit`'s second start. The initial model is then that model.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub feedthrough_taken_out: bool,
 }
 
 /// One repair of the first fit's modal structure.

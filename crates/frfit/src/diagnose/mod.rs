@@ -22,6 +22,7 @@
 
 mod accept;
 mod candidate;
+mod delay_reading;
 mod fitted;
 pub mod held_out;
 mod refit;
@@ -176,6 +177,32 @@ fn match_factors(
 }
 
 impl State {
+    /// Makes the model of an accepted reading (`model` at cost `cost`, its response
+    /// `response`; step `step`, 1-based) the current one, without the modes it made
+    /// redundant ([`accept::prune`], as after the loop's steps: a mode that held part of
+    /// the reading's effect, a low mode beside the free body that the suspension replaced).
+    fn take_reading(
+        &mut self,
+        ctx: &FitContext,
+        cfg: &PipelineConfig,
+        (model, cost): (AdditiveModel, f64),
+        response: ResponseGrid,
+        step: usize,
+        notes: &mut Vec<String>,
+    ) -> Result<(), FrfitError> {
+        let n_modes = model.modes().len();
+        let pruned = accept::prune(ctx, cfg, model, cost, step, notes)?;
+        if pruned.modes().len() == n_modes {
+            self.cost = cost;
+            self.response = response;
+        } else {
+            self.cost = model_cost(&pruned, &ctx.fit_data);
+            self.response = pruned.response_at(&ctx.omega);
+        }
+        self.model = pruned;
+        self.reanalyze(ctx)
+    }
+
     /// The residual analysis of the current model's response, after a change of model.
     fn reanalyze(&mut self, ctx: &FitContext) -> Result<(), FrfitError> {
         self.analysis = analyze_residual(
@@ -309,7 +336,15 @@ pub fn diagnose(
     let mut step_responses = Vec::new();
     let mut stages: Vec<(String, f64)> = Vec::new();
     let t_reading = std::time::Instant::now();
-    if suspension_reading(ctx, cfg, &riv, &mut st, &mut steps, &mut step_responses)? {
+    if suspension_reading(
+        ctx,
+        cfg,
+        &riv,
+        &mut st,
+        &mut steps,
+        &mut step_responses,
+        &mut fit.messages,
+    )? {
         stages.push((
             "diagnose: suspended-body reading".into(),
             t_reading.elapsed().as_secs_f64(),
@@ -425,7 +460,30 @@ pub fn diagnose(
         st.reanalyze(ctx)?;
         // a loop that reaches the noise level can leave the body's low mode beside an
         // empty free body
-        suspension_reading(ctx, cfg, &riv, &mut st, &mut steps, &mut step_responses)?;
+        suspension_reading(
+            ctx,
+            cfg,
+            &riv,
+            &mut st,
+            &mut steps,
+            &mut step_responses,
+            &mut fit.messages,
+        )?;
+    }
+    let t_reading = std::time::Instant::now();
+    if delay_readings(
+        ctx,
+        cfg,
+        &riv,
+        &mut st,
+        &mut steps,
+        &mut step_responses,
+        &mut fit.messages,
+    )? {
+        stages.push((
+            "diagnose: common factors read as a delay".into(),
+            t_reading.elapsed().as_secs_f64(),
+        ));
     }
     let t_final = std::time::Instant::now();
     // twins the first fit left where no step was accepted after them
@@ -465,6 +523,7 @@ fn suspension_reading(
     st: &mut State,
     steps: &mut Vec<StepSummary>,
     step_responses: &mut Vec<(ResponseGrid, ResponseGrid)>,
+    notes: &mut Vec<String>,
 ) -> Result<bool, FrfitError> {
     if st.analysis.significant || st.n_accepted >= cfg.max_steps {
         return Ok(false);
@@ -508,12 +567,92 @@ fn suspension_reading(
     if accepted {
         st.allowed_increase += (tr.cost - st.cost).max(0.0);
         st.n_accepted += 1;
-        st.cost = tr.cost;
-        st.model = tr.model;
-        st.response = after_resp;
-        st.reanalyze(ctx)?;
+        st.take_reading(
+            ctx,
+            cfg,
+            (tr.model, tr.cost),
+            after_resp,
+            steps.len(),
+            notes,
+        )?;
     }
     Ok(true)
+}
+
+/// Tests each common first-order factor that an accepted step added as a delay
+/// ([`delay_reading::factor_as_delay`]) once the residual is at the noise level: a
+/// model at the noise level can hold an undeclared delay as such a factor, which fits
+/// as well but names the wrong physics. Each trial is recorded as a `delay` step; when
+/// accepted, the factor's step is marked as taken out by it and the delay is the
+/// model's. Whether a reading was tested.
+fn delay_readings(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    riv: &RivConfig,
+    st: &mut State,
+    steps: &mut Vec<StepSummary>,
+    step_responses: &mut Vec<(ResponseGrid, ResponseGrid)>,
+    notes: &mut Vec<String>,
+) -> Result<bool, FrfitError> {
+    let mut tested = false;
+    let mut done: Vec<usize> = Vec::new();
+    loop {
+        if st.analysis.significant || st.n_accepted >= cfg.max_steps {
+            return Ok(tested);
+        }
+        // the next common factor of an accepted step not read yet
+        let Some((k, j)) = st.factor_steps.iter().enumerate().find_map(|(k, o)| {
+            o.filter(|j| {
+                !done.contains(j)
+                    && st
+                        .model
+                        .dynamics
+                        .get(k)
+                        .is_some_and(delay_reading::reads_as_delay)
+            })
+            .map(|j| (k, j))
+        }) else {
+            return Ok(tested);
+        };
+        done.push(j);
+        tested = true;
+        cfg.progress.step(
+            "diagnose",
+            st.n_tests + 1,
+            None,
+            None,
+            format!("testing the common factor of step {} as a delay", j + 1),
+        );
+        st.n_tests += 1;
+        let fd = &ctx.fit_data;
+        let stats = ResidualStats::new(&st.model, fd);
+        let current = Current {
+            model: &st.model,
+            cost: st.cost,
+            stats: &stats,
+        };
+        let Some((tr, accepted)) = delay_reading::factor_as_delay(ctx, cfg, riv, &current, k, j)
+        else {
+            continue;
+        };
+        let before = error_stats(&ctx.band, &st.response, &ctx.noise);
+        let index = steps.len();
+        let after_resp = record_trial(
+            ctx,
+            &tr,
+            accepted,
+            (&st.response, before),
+            steps,
+            step_responses,
+        );
+        if accepted {
+            steps[j].superseded_by = Some(index + 1);
+            st.factor_steps.remove(k);
+            st.delay_step = Some((index, st.model.factor.delay_s));
+            st.n_accepted += 1;
+            st.take_reading(ctx, cfg, (tr.model, tr.cost), after_resp, index + 1, notes)?;
+        }
+    }
 }
 
 /// One round: the candidates of the current residual and their trials; `None` when

@@ -175,6 +175,13 @@ pub fn from_fit_if_worse(
         .filter(|s| s.accepted)
         .map(|s| s.effect().to_string())
         .collect();
+    // a feedthrough that `fit`'s model holds (its common-denominator start is biproper)
+    // and the diagnosis's own first fit did not is tested by the loop as a step: the
+    // loop starts from `fit`'s model without it
+    let without_feedthrough = (has_feedthrough(&reference.fit.model)
+        && !has_feedthrough(start.model))
+    .then(|| feedthrough_taken_out(ctx, cfg, &reference.fit))
+    .flatten();
     let summary = FromFitSummary {
         reason: format!(
             "the diagnosis from its own first fit ended worse on the data than the model `frfit fit` gives ({reason}); it ran again from that model"
@@ -185,6 +192,7 @@ pub fn from_fit_if_worse(
         replaced_final_modes: diagnosis.fit.model.modes().len(),
         replaced_final_errors: ours.errors,
         replaced_accepted,
+        feedthrough_taken_out: without_feedthrough.is_some(),
     };
     cfg.progress.step(
         "diagnose",
@@ -193,11 +201,20 @@ pub fn from_fit_if_worse(
         None,
         "starting again from `fit`'s model",
     );
+    // the start of the second diagnosis: `fit`'s model, or it without its feedthrough
+    let (start_fit, start_response, start_errors) = match without_feedthrough {
+        Some(f) => {
+            let r = f.model.response_at(&ctx.omega);
+            let e = error_stats(&ctx.band, &r, &ctx.noise);
+            (f, r, e)
+        }
+        None => (reference.fit.clone(), ref_response.clone(), theirs.errors),
+    };
     let mut second = diagnose(
         ctx,
         cfg,
-        reference.fit.clone(),
-        &ref_response,
+        start_fit.clone(),
+        &start_response,
         None,
         None,
         None,
@@ -214,14 +231,49 @@ pub fn from_fit_if_worse(
         second.fit = kept;
         final_response = ref_response.clone();
     }
+    let mut reference = reference;
+    reference.fit = start_fit;
     Ok(FromFit {
         diagnosis: second,
         final_response,
         replaced: Some(Replacement {
-            response: ref_response,
-            errors: theirs.errors,
+            response: start_response,
+            errors: start_errors,
             reference,
             summary,
         }),
     })
+}
+
+/// Whether `model` holds a feedthrough submodel.
+fn has_feedthrough(model: &AdditiveModel) -> bool {
+    model
+        .submodels
+        .iter()
+        .any(|s| s.kind == additive_riv::SubmodelKind::Feedthrough)
+}
+
+/// `fit` with its feedthrough taken out and the rest refitted (numerators, eq. 24, then
+/// Algorithm 1); `None` when the refit fails.
+fn feedthrough_taken_out(
+    ctx: &FitContext,
+    cfg: &PipelineConfig,
+    fit: &frf_data::Fit<AdditiveModel>,
+) -> Option<frf_data::Fit<AdditiveModel>> {
+    let fd = &ctx.fit_data;
+    let mut m = fit.model.clone();
+    m.submodels
+        .retain(|s| s.kind != additive_riv::SubmodelKind::Feedthrough);
+    additive_riv::fit_numerators(&mut m, fd).ok()?;
+    let riv = additive_riv::riv::RivConfig {
+        progress: frf_data::ProgressSink::none(),
+        ..ctx.riv_config(cfg)
+    };
+    let refit = additive_riv::riv::iterate(m, fd, &riv).ok()?;
+    let mut out = fit.clone();
+    out.model = refit.model;
+    out.messages.push(
+        "`fit`'s model with its feedthrough taken out and the rest refitted: the start of the diagnosis, which tests a feedthrough as a step".into(),
+    );
+    Some(out)
 }
