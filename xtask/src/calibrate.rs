@@ -322,10 +322,9 @@ impl Tally {
 /// The wafer-stage plant: a new closed-loop experiment per draw, of one plate or (with
 /// `--vary-plate`) of another plate each draw.
 fn wafer(a: &Args) -> Result<(), Error> {
-    use experiment::nonparametric::{EstimatorConfig, LineGrid};
+    use experiment::nonparametric::EstimatorConfig;
     use experiment::synth::{
-        ControllerConfig, ExperimentConfig, NoiseConfig, SimulationPath, WaferStageConfig,
-        WaferStageExperiment,
+        ControllerConfig, SimulationPath, WaferStageConfig, WaferStageExperiment,
     };
     let (periods, realizations) = (10, 10);
     let mut tally = Tally::default();
@@ -341,26 +340,15 @@ fn wafer(a: &Args) -> Result<(), Error> {
             },
             ..WaferStageConfig::default()
         };
-        let exp = ExperimentConfig {
-            grid: LineGrid::odd(stage.fs, 40_000, 0.0, 2000.0).stage("grid")?,
-            periods,
-            realizations,
-            transient_periods: 1,
-            rms: 2.0,
-            output_noise: NoiseConfig {
-                white_rms: 1e-9,
-                drift_rms: 5e-9,
-                drift_corner_hz: 0.5,
-            },
-            input_noise_rms: 0.0,
-            cubic_nonlinearity: 0.0,
-            stochastic_distortion: 0.0,
-            delay_samples: stage.delay_samples,
-            excited_inputs: None,
-            plant_dynamics: Vec::new(),
-            seed: a.seed.wrapping_mul(1_000_003).wrapping_add(d as u64 + 1),
-            keep_time_signals: false,
-        };
+        let exp = crate::reference_experiment::reference_experiment(
+            stage.fs,
+            40_000,
+            (periods, realizations),
+            stage.delay_samples,
+            Vec::new(),
+            a.seed.wrapping_mul(1_000_003).wrapping_add(d as u64 + 1),
+        )
+        .stage("experiment")?;
         let w = WaferStageExperiment::new(&stage, &ControllerConfig::default(), exp)
             .stage("wafer stage")?;
         let t = w.stage.truth();

@@ -11,10 +11,10 @@
 //! within 1e-4 (median relative, every line) of the noiseless response.
 
 use crate::{Context, Error};
-use experiment::nonparametric::{EstimatorConfig, LineGrid};
+use experiment::nonparametric::EstimatorConfig;
 use experiment::synth::{
-    ClosedLoopExperiment, ControllerConfig, ExperimentConfig, FlexibleMode, NoiseConfig, RigidBody,
-    RigidBodyController, SimulationPath, WaferStage, WaferStageConfig,
+    ClosedLoopExperiment, ControllerConfig, FlexibleMode, RigidBody, RigidBodyController,
+    SimulationPath, WaferStage, WaferStageConfig,
 };
 use faer::Mat;
 use frf_data::{Frf, FrfDataset, ModelStructure};
@@ -329,26 +329,14 @@ fn simulate(sim: &Sim) -> Result<(Frf, Frf, usize), frf_data::FrfError> {
         ..nominal
     };
     let (periods, realizations) = (4, 10);
-    let exp = ExperimentConfig {
-        grid: LineGrid::odd(stage.fs, 20_000, 0.0, 2000.0)?,
-        periods,
-        realizations,
-        transient_periods: 1,
-        rms: 2.0,
-        output_noise: NoiseConfig {
-            white_rms: 1e-9,
-            drift_rms: 5e-9,
-            drift_corner_hz: 0.5,
-        },
-        input_noise_rms: 0.0,
-        cubic_nonlinearity: 0.0,
-        stochastic_distortion: 0.0,
-        delay_samples: stage.delay_samples,
-        excited_inputs: None,
-        plant_dynamics: sim.plant_dynamics.clone(),
-        seed: sim.seed,
-        keep_time_signals: false,
-    };
+    let exp = crate::reference_experiment::reference_experiment(
+        stage.fs,
+        20_000,
+        (periods, realizations),
+        stage.delay_samples,
+        sim.plant_dynamics.clone(),
+        sim.seed,
+    )?;
     let mut plate = WaferStage::build(&stage)?;
     let plant = &mut plate.plant;
     if let Some((f_hz, zeta)) = sim.suspension {

@@ -20,6 +20,7 @@ mod calibrate;
 mod effects;
 mod fuzz;
 mod oomen_bosgra;
+mod reference_experiment;
 mod validate;
 mod wafer_stage;
 

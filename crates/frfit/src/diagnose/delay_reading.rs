@@ -88,19 +88,7 @@ pub fn factor_as_delay(
         refit: None,
     };
     Some((
-        Trial {
-            params,
-            evidence,
-            model: m,
-            cost,
-            f,
-            f_crit,
-            added: 0,
-            joint_modes: Vec::new(),
-            screened: None,
-            candidate: None,
-            held_out: None,
-        },
+        Trial::reading(params, evidence, (m, cost), (f, f_crit)),
         accepted,
     ))
 }

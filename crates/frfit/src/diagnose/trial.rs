@@ -46,6 +46,32 @@ pub struct Trial {
     pub held_out: Option<HeldOutCost>,
 }
 
+impl Trial {
+    /// The trial of a reading of the current model (the suspended body, a factor read as
+    /// a delay): a simpler model in place of parts of it, adding no parameter, with the F
+    /// statistic `f` (critical `f_crit`) of the parts it replaces beside it.
+    pub fn reading(
+        params: FittedEffect,
+        evidence: String,
+        (model, cost): (AdditiveModel, f64),
+        (f, f_crit): (f64, f64),
+    ) -> Self {
+        Self {
+            params,
+            evidence,
+            model,
+            cost,
+            f,
+            f_crit,
+            added: 0,
+            joint_modes: Vec::new(),
+            screened: None,
+            candidate: None,
+            held_out: None,
+        }
+    }
+}
+
 /// A candidate refit stopped at the screening cap ([`refit_candidate`] with `cap`).
 #[derive(Debug, Clone)]
 pub struct Screened {
@@ -551,19 +577,7 @@ pub fn suspended_body(
     );
     let params = FittedEffect::of_refit(&candidate, current.model, &m);
     Some((
-        Trial {
-            params,
-            evidence,
-            model: m,
-            cost,
-            f,
-            f_crit,
-            added: 0,
-            joint_modes: Vec::new(),
-            screened: None,
-            candidate: None,
-            held_out: None,
-        },
+        Trial::reading(params, evidence, (m, cost), (f, f_crit)),
         accepted,
     ))
 }
