@@ -193,13 +193,6 @@ fn draw(case: Case, seed: u64, plate: &WaferStage) -> Setup {
         seed,
         ..Sim::default()
     };
-    let shape = |rng: &mut ChaCha8Rng, len: usize, amp: f64| -> Vec<f64> {
-        (0..len)
-            .map(|_| {
-                amp * rng.random_range(0.3..1.0) * if rng.random_bool(0.5) { 1.0 } else { -1.0 }
-            })
-            .collect()
-    };
     match case {
         Case::LagDelay => {
             let f = rng.random_range(1200.0..2500.0);
@@ -249,12 +242,7 @@ fn draw(case: Case, seed: u64, plate: &WaferStage) -> Setup {
             let k = rng.random_range(4..n.saturating_sub(2).max(5));
             let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
             let f = modes[k] * (1.0 + side * rng.random_range(0.01..0.02));
-            let hidden = FlexibleMode {
-                f_hz: f,
-                zeta: rng.random_range(0.004..0.008),
-                c: shape(&mut rng, 4, 0.8),
-                b: shape(&mut rng, 13, 0.3),
-            };
+            let hidden = mode_at(&mut rng, f, 0.008);
             Setup {
                 what: format!(
                     "hidden mode {f:.1} Hz beside {:.1} Hz, --modes {n}",
@@ -277,12 +265,7 @@ fn draw(case: Case, seed: u64, plate: &WaferStage) -> Setup {
                     break f;
                 }
             };
-            let hidden = FlexibleMode {
-                f_hz: f,
-                zeta: rng.random_range(0.004..0.01),
-                c: shape(&mut rng, 4, 0.8),
-                b: shape(&mut rng, 13, 0.3),
-            };
+            let hidden = mode_at(&mut rng, f, 0.01);
             Setup {
                 what: format!(
                     "input {} lag {f_lag:.0} Hz, missed mode {f:.1} Hz, --modes {n}",
@@ -316,6 +299,23 @@ fn draw(case: Case, seed: u64, plate: &WaferStage) -> Setup {
             }
         }
     }
+}
+
+/// A mode at `f_hz` with damping drawn in `0.004..zeta_max` and mode shapes of random
+/// signs and magnitudes (0.3-1 of 0.8 at the sensors, of 0.3 at the actuators), drawn
+/// from `rng` in that order.
+fn mode_at(rng: &mut ChaCha8Rng, f_hz: f64, zeta_max: f64) -> FlexibleMode {
+    let zeta = rng.random_range(0.004..zeta_max);
+    let mut shape = |len: usize, amp: f64| -> Vec<f64> {
+        (0..len)
+            .map(|_| {
+                amp * rng.random_range(0.3..1.0) * if rng.random_bool(0.5) { 1.0 } else { -1.0 }
+            })
+            .collect()
+    };
+    let c = shape(4, 0.8);
+    let b = shape(13, 0.3);
+    FlexibleMode { f_hz, zeta, c, b }
 }
 
 /// The closed-loop experiment of `sim` (lines 1 Hz apart to 2 kHz, 4 periods x 10
