@@ -221,7 +221,34 @@ pub fn from_fit_if_worse(
     )?;
     second.fit.messages.insert(0, summary.reason.clone());
     let mut final_response = second.fit.model.response_at(&ctx.omega);
-    let second_standing = Standing::of(ctx, &second.fit.model, &final_response);
+    let mut second_standing = Standing::of(ctx, &second.fit.model, &final_response);
+    let mut summary = summary;
+    let (mut start_fit, mut start_response, mut start_errors) =
+        (start_fit, start_response, start_errors);
+    if summary.feedthrough_taken_out && ends_worse(&second_standing, &theirs, n_obs).is_some() {
+        // without its feedthrough the loop did not climb back to `fit`'s model: the
+        // diagnosis from `fit`'s model as it is
+        let mut third = diagnose(
+            ctx,
+            cfg,
+            reference.fit.clone(),
+            &ref_response,
+            None,
+            None,
+            None,
+        )?;
+        summary.feedthrough_taken_out = false;
+        third.fit.messages.insert(0, summary.reason.clone());
+        third.fit.messages.insert(
+            1,
+            "the diagnosis from `fit`'s model without its feedthrough ended worse than that model; it ran again from `fit`'s model as it is".into(),
+        );
+        second = third;
+        final_response = second.fit.model.response_at(&ctx.omega);
+        second_standing = Standing::of(ctx, &second.fit.model, &final_response);
+        (start_fit, start_response, start_errors) =
+            (reference.fit.clone(), ref_response.clone(), theirs.errors);
+    }
     if let Some(why) = ends_worse(&second_standing, &theirs, n_obs) {
         let mut kept = reference.fit.clone();
         kept.messages = std::mem::take(&mut second.fit.messages);
