@@ -457,13 +457,16 @@ impl AdditiveModel {
         Ok(i)
     }
 
-    /// Adds a feedthrough (constant, biproper) submodel `D`; at most one is allowed.
-    pub fn push_feedthrough(&mut self) -> Result<usize, RivError> {
-        if self
-            .submodels
+    /// Whether the model holds a feedthrough (constant, biproper) submodel.
+    pub fn has_feedthrough(&self) -> bool {
+        self.submodels
             .iter()
             .any(|s| s.kind == SubmodelKind::Feedthrough)
-        {
+    }
+
+    /// Adds a feedthrough (constant, biproper) submodel `D`; at most one is allowed.
+    pub fn push_feedthrough(&mut self) -> Result<usize, RivError> {
+        if self.has_feedthrough() {
             return Err(RivError::Structure(
                 "at most one biproper (feedthrough) submodel is allowed".into(),
             ));

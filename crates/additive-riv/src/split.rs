@@ -513,10 +513,7 @@ pub fn add_out_of_band_mode(
             .map(|r| if edge == "upper" { fe * r } else { fe / r })
             .collect();
         let base = &cur;
-        let has_ft = cur
-            .submodels
-            .iter()
-            .any(|s| s.kind == SubmodelKind::Feedthrough);
+        let has_ft = cur.has_feedthrough();
         let (modes, feed) = rayon::join(
             || -> Vec<(f64, Option<AdditiveModel>)> {
                 starts

@@ -944,12 +944,7 @@ pub fn propose(
             push(Candidate::Hold { fs_hz: fs }, ev);
         }
     }
-    if !model
-        .submodels
-        .iter()
-        .any(|s| s.kind == SubmodelKind::Feedthrough)
-        && plausible(&an.feedthrough.fit, alpha)
-    {
+    if !model.has_feedthrough() && plausible(&an.feedthrough.fit, alpha) {
         // inside the delay and hold (a biproper plant) or bypassing them (crosstalk)
         for bypass in [false, true] {
             push(

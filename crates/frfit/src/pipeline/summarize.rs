@@ -6,7 +6,7 @@ use super::context::FitContext;
 use crate::effects::{ModeParams, Repair};
 use crate::summary::*;
 use crate::FrfitError;
-use additive_riv::{AdditiveModel, FactorTarget, FitterReport, SubmodelKind};
+use additive_riv::{AdditiveModel, FactorTarget, FitterReport};
 use frf_data::{Fit, Frf, FrfDataset};
 use realize::ResponseGrid;
 use validation::analysis::ResidualAnalysis;
@@ -99,10 +99,7 @@ pub fn final_model_summary(fit: &Fit<AdditiveModel>) -> FinalModelSummary {
         delay_s: model.factor.delay_s,
         hold: hold_name(model),
         rigid_body_integrators: model.integrators(),
-        feedthrough: model
-            .submodels
-            .iter()
-            .any(|s| s.kind == SubmodelKind::Feedthrough),
+        feedthrough: model.has_feedthrough(),
         dynamics: model
             .dynamics
             .iter()

@@ -178,8 +178,8 @@ pub fn from_fit_if_worse(
     // a feedthrough that `fit`'s model holds (its common-denominator start is biproper)
     // and the diagnosis's own first fit did not is tested by the loop as a step: the
     // loop starts from `fit`'s model without it
-    let without_feedthrough = (has_feedthrough(&reference.fit.model)
-        && !has_feedthrough(start.model))
+    let without_feedthrough = (reference.fit.model.has_feedthrough()
+        && !start.model.has_feedthrough())
     .then(|| feedthrough_taken_out(ctx, cfg, &reference.fit))
     .flatten();
     let summary = FromFitSummary {
@@ -201,54 +201,49 @@ pub fn from_fit_if_worse(
         None,
         "starting again from `fit`'s model",
     );
-    // the start of the second diagnosis: `fit`'s model, or it without its feedthrough
-    let (start_fit, start_response, start_errors) = match without_feedthrough {
-        Some(f) => {
-            let r = f.model.response_at(&ctx.omega);
-            let e = error_stats(&ctx.band, &r, &ctx.noise);
-            (f, r, e)
+    // the diagnosis from `start` (a fit and its response), with the summary's reason
+    // first in its messages: its final response and standing
+    let run_from = |start: &frf_data::Fit<AdditiveModel>,
+                    response: &ResponseGrid,
+                    note: Option<&str>|
+     -> Result<(Diagnosis, ResponseGrid, Standing), FrfitError> {
+        let mut d = diagnose(ctx, cfg, start.clone(), response, None, None, None)?;
+        d.fit.messages.insert(0, summary.reason.clone());
+        if let Some(n) = note {
+            d.fit.messages.insert(1, n.to_string());
         }
-        None => (reference.fit.clone(), ref_response.clone(), theirs.errors),
+        let r = d.fit.model.response_at(&ctx.omega);
+        let s = Standing::of(ctx, &d.fit.model, &r);
+        Ok((d, r, s))
     };
-    let mut second = diagnose(
-        ctx,
-        cfg,
-        start_fit.clone(),
-        &start_response,
-        None,
-        None,
-        None,
-    )?;
-    second.fit.messages.insert(0, summary.reason.clone());
-    let mut final_response = second.fit.model.response_at(&ctx.omega);
-    let mut second_standing = Standing::of(ctx, &second.fit.model, &final_response);
-    let mut summary = summary;
-    let (mut start_fit, mut start_response, mut start_errors) =
-        (start_fit, start_response, start_errors);
-    if summary.feedthrough_taken_out && ends_worse(&second_standing, &theirs, n_obs).is_some() {
-        // without its feedthrough the loop did not climb back to `fit`'s model: the
-        // diagnosis from `fit`'s model as it is
-        let mut third = diagnose(
-            ctx,
-            cfg,
-            reference.fit.clone(),
-            &ref_response,
-            None,
-            None,
-            None,
-        )?;
-        summary.feedthrough_taken_out = false;
-        third.fit.messages.insert(0, summary.reason.clone());
-        third.fit.messages.insert(
-            1,
-            "the diagnosis from `fit`'s model without its feedthrough ended worse than that model; it ran again from `fit`'s model as it is".into(),
-        );
-        second = third;
-        final_response = second.fit.model.response_at(&ctx.omega);
-        second_standing = Standing::of(ctx, &second.fit.model, &final_response);
-        (start_fit, start_response, start_errors) =
-            (reference.fit.clone(), ref_response.clone(), theirs.errors);
+    // from `fit`'s model without its feedthrough; when that does not climb back to
+    // `fit`'s model, from `fit`'s model as it is
+    let mut from_start = None;
+    if let Some(f) = without_feedthrough {
+        let response = f.model.response_at(&ctx.omega);
+        let run = run_from(&f, &response, None)?;
+        if ends_worse(&run.2, &theirs, n_obs).is_none() {
+            let errors = error_stats(&ctx.band, &response, &ctx.noise);
+            from_start = Some((run, (f, response, errors)));
+        }
     }
+    let feedthrough_taken_out = from_start.is_some();
+    let ((mut second, mut final_response, second_standing), (start_fit, start_response, start_errors)) =
+        match from_start {
+            Some(r) => r,
+            None => (
+                run_from(
+                    &reference.fit,
+                    &ref_response,
+                    summary.feedthrough_taken_out.then_some(
+                        "the diagnosis from `fit`'s model without its feedthrough ended worse than that model; it ran again from `fit`'s model as it is",
+                    ),
+                )?,
+                (reference.fit.clone(), ref_response.clone(), theirs.errors),
+            ),
+        };
+    let mut summary = summary;
+    summary.feedthrough_taken_out = feedthrough_taken_out;
     if let Some(why) = ends_worse(&second_standing, &theirs, n_obs) {
         let mut kept = reference.fit.clone();
         kept.messages = std::mem::take(&mut second.fit.messages);
@@ -270,14 +265,6 @@ pub fn from_fit_if_worse(
             summary,
         }),
     })
-}
-
-/// Whether `model` holds a feedthrough submodel.
-fn has_feedthrough(model: &AdditiveModel) -> bool {
-    model
-        .submodels
-        .iter()
-        .any(|s| s.kind == additive_riv::SubmodelKind::Feedthrough)
 }
 
 /// `fit` with its feedthrough taken out and the rest refitted (numerators, eq. 24, then
