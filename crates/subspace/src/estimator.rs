@@ -10,7 +10,7 @@ use crate::order::{
     SweepSettings, RANK_TOL,
 };
 use crate::pole_refine::{refine_poles, PoleRefineSettings};
-use crate::prepare::{prepare, Variable};
+use crate::prepare::{prepare, Prepared, Variable};
 use crate::projection::project;
 use crate::realization::{bilinear_to_continuous, fit_b_d, shift_a_c};
 use crate::SubspaceError;
@@ -1006,6 +1006,20 @@ impl SubspaceInit {
             OrderRule::SingularValues => false,
         };
         let raw = |c: f64| c * 2.0 * nl as f64;
+        if significance_tests && cfg.order.is_none() && ps.integrators > 0 {
+            if let Some((tm, tc, t_cost, why)) =
+                self.integrators_not_supported((&prepared, &g, &factors), &ps, cost, |c| raw(c))?
+            {
+                messages.push(format!(
+                    "rigid body: the {} integrators of the singular values left out ({why}; cost {cost:.4e} -> {t_cost:.4e})",
+                    ps.integrators
+                ));
+                ps.integrators = 0;
+                model = tm;
+                cond_res = tc;
+                cost = t_cost;
+            }
+        }
         // Without the data's variance the F statistic's noise estimate (the larger
         // model's residual) is not known to be white under the weighting: an added
         // integrator must also lower the cost by `INTEGRATOR_MIN_DROP`.
@@ -1303,6 +1317,60 @@ const FLEXIBLE_PASSES: usize = 8;
 /// sweep takes a fit as exact (a relative rms error of 1e-8) and stops: beyond it the
 /// residual is roundoff, not noise.
 const EXACT_REL_COST: f64 = 1e-16;
+
+impl SubspaceInit {
+    /// The rigid-body part that the singular values gave (`ps.integrators` at the
+    /// origin) tested against the same poles without it: it is left out when the fit
+    /// without it is exact (noise-free data whose largest singular-value gap lies below
+    /// two round-off states at the origin: a 1 x 1 system with two modes, residues of
+    /// 1e-13 on a rigid body it does not have) or when its coefficients fail the F test
+    /// of the structure tests ([`crate::order::f_statistic`]). Returns the model without
+    /// it, its conditioning and cost, and the reason.
+    fn integrators_not_supported(
+        &self,
+        (prepared, g, factors): (&Prepared, &[C64], &KnownFactors),
+        ps: &PoleSet,
+        cost: f64,
+        raw: impl Fn(f64) -> f64,
+    ) -> Result<Option<(FrfModel, f64, f64, String)>, SubspaceError> {
+        let cfg = &self.config;
+        let (ny, nu) = (prepared.ny, prepared.nu);
+        let mut trial = ps.clone();
+        trial.integrators = 0;
+        let (tm, tc, t_cost) =
+            fit_residues(ny, nu, &prepared.omega, g, &prepared.w, &trial, factors)?;
+        if raw(t_cost) <= EXACT_REL_COST * prepared.energy() {
+            return Ok(Some((
+                tm,
+                tc,
+                t_cost,
+                "the fit without them is exact".to_string(),
+            )));
+        }
+        let m = ny * nu;
+        let observations = prepared.w.iter().filter(|&&w| w > 0.0).count();
+        let dp = currency_params(ps, m) - currency_params(&trial, m);
+        let f = f_statistic(
+            raw(t_cost) - raw(cost),
+            dp,
+            raw(cost),
+            observations,
+            currency_params(ps, m),
+        );
+        let fc = f_critical(dp, cfg.order_alpha).max(cfg.order_min_f);
+        Ok((f <= fc).then(|| {
+            (
+                tm,
+                tc,
+                t_cost,
+                format!(
+                    "their coefficients are not significant: F = {f:.3e} <= {fc:.3} (alpha {:.0e})",
+                    cfg.order_alpha
+                ),
+            )
+        }))
+    }
+}
 
 /// Without the data's variance, the factor by which an integrator of the rigid-body
 /// test must lower the weighted cost besides passing the F test. A rigid body the
