@@ -552,9 +552,10 @@ fn suspension_reading(
         "testing a suspended body in place of a free body and a low mode".to_string(),
     );
     st.n_tests += 1;
-    let Some((tr, accepted)) = trial::suspended_body(ctx, cfg, riv, &current, p) else {
+    let Some((mut tr, accepted)) = trial::suspended_body(ctx, cfg, riv, &current, p) else {
         return Ok(true);
     };
+    let accepted = accepted && reading_held_out(ctx, riv, &st.model, &mut tr);
     let before = error_stats(&ctx.band, &st.response, &ctx.noise);
     let after_resp = record_trial(
         ctx,
@@ -631,10 +632,12 @@ fn delay_readings(
             cost: st.cost,
             stats: &stats,
         };
-        let Some((tr, accepted)) = delay_reading::factor_as_delay(ctx, cfg, riv, &current, k, j)
+        let Some((mut tr, accepted)) =
+            delay_reading::factor_as_delay(ctx, cfg, riv, &current, k, j)
         else {
             continue;
         };
+        let accepted = accepted && reading_held_out(ctx, riv, &st.model, &mut tr);
         let before = error_stats(&ctx.band, &st.response, &ctx.noise);
         let index = steps.len();
         let after_resp = record_trial(
@@ -895,6 +898,33 @@ fn best_held_out(
             )),
             _ => return Some(i),
         }
+    }
+}
+
+/// A reading that its F test accepted (a simpler model in place of `current`: a
+/// suspended body for a free body and a low mode, a delay for a common factor) checked
+/// on interleaved held-out lines ([`held_out::held_out`]) as a loop step is: it is kept
+/// only when the simpler model's held-out cost is below the current model's (the
+/// parameters it drops then followed only the fitted lines). A reading that raises it
+/// is not accepted, and its evidence says so. A check that cannot be made (too few
+/// lines, a failed refit) does not hold the reading back.
+fn reading_held_out(
+    ctx: &FitContext,
+    riv: &RivConfig,
+    current: &AdditiveModel,
+    tr: &mut Trial,
+) -> bool {
+    let h = held_out::held_out(ctx.held_out_halves(), riv, current, &tr.model);
+    tr.held_out = h;
+    match h {
+        Some(h) if !h.lowers() => {
+            tr.evidence = format!(
+                "{}; not accepted: on interleaved held-out lines (refitted on the even lines and tested on the odd ones, and the reverse) it raises the weighted cost from {:.4e} to {:.4e}",
+                tr.evidence, h.before, h.after
+            );
+            false
+        }
+        _ => true,
     }
 }
 
