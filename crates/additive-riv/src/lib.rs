@@ -25,6 +25,7 @@ pub mod complete;
 pub mod error;
 pub mod fitter;
 pub mod gram;
+pub mod held_out;
 pub mod init;
 pub mod mode_scan;
 pub mod model;

@@ -10,6 +10,7 @@
 //! freedom. A peak must exceed the Bonferroni-corrected quantile over all lines. A mode
 //! is kept only when the F statistic of its parameters passes at significance `alpha`.
 
+use crate::held_out::{halves, held_out};
 use crate::pair_start::with_local_pairs;
 use crate::problem::FitData;
 use crate::residual_stats::{
@@ -322,7 +323,11 @@ pub fn prune_modes(
 
 /// Refines `start` with RIV, then adds modes at significant residual peaks and removes
 /// insignificant, duplicate or unstable ones, refining after each change, until nothing
-/// changes or `cfg.max_rounds` rounds have run.
+/// changes or `cfg.max_rounds` rounds have run. A round's additions that pass their
+/// tests on the data must also lower the weighted cost on interleaved held-out lines
+/// ([`crate::held_out`]): additions that raise it (modes that follow the noise or the
+/// nonlinear distortion of the lines they were fitted to) are taken out again, the
+/// structure step says so with both costs, and the structure is final.
 pub fn adapt_modes(
     start: AdditiveModel,
     data: &FitData,
@@ -345,7 +350,10 @@ pub fn adapt_modes(
     report.refinements.push(fit.iterations);
     let mut total_iterations = fit.iterations;
     let mut history = fit.cost_history.clone();
+    // the data's even and odd lines, made when a round's additions are first checked
+    let mut held_out_halves: Option<[FitData; 2]> = None;
     for round in 0..cfg.max_rounds {
+        let mut held_back = false;
         report.rounds = round + 1;
         let previous = fit.clone();
         let previous_cost = cost_of(&previous.model, data);
@@ -381,6 +389,8 @@ pub fn adapt_modes(
         let first_order = model_first_order(&model);
         let stats = kept_stats.unwrap_or_else(|| ResidualStats::new(&model, data));
         let mut peak_at = Vec::new();
+        // the structure the round's additions are held against on held-out lines
+        let before_adds = model.clone();
         for &(f, _) in residual_peaks_over(
             &stats,
             data,
@@ -494,6 +504,7 @@ pub fn adapt_modes(
             }
             let protect: Vec<usize> = (0..n_old).collect();
             let (dropped_new, stats, _) = drop_pass(&mut model, data, cfg, &protect)?;
+            let added_before = report.added.len();
             for &i in &kept_added {
                 let j = remap(i);
                 if !dropped_new.iter().any(|d| d.0 == j) {
@@ -520,6 +531,41 @@ pub fn adapt_modes(
                     .dropped
                     .extend(dropped_new.into_iter().map(|(_, f, why)| (f, why)));
                 refit.model = model;
+            }
+            // the surviving additions must also lower the error on the lines they
+            // were not fitted to
+            if survived {
+                let halves = held_out_halves.get_or_insert_with(|| halves(data));
+                let h = held_out(halves, &coarse, &before_adds, &refit.model);
+                if let Some(st) = added_step.as_mut() {
+                    st.held_out = h;
+                }
+                if let Some(h) = h.filter(|h| !h.lowers()) {
+                    let rejected: Vec<(f64, f64)> = report.added.drain(added_before..).collect();
+                    report.dropped.extend(rejected.iter().map(|&(f, fs)| {
+                        (
+                            f,
+                            format!(
+                                "added at a residual peak (F = {fs:.1}), but on interleaved held-out lines (refitted on the even lines and tested on the odd ones, and the reverse) the round's additions raise the weighted cost from {:.4e} to {:.4e}",
+                                h.before, h.after
+                            ),
+                        )
+                    }));
+                    if let Some(st) = added_step.as_mut() {
+                        st.accepted = false;
+                    }
+                    // back to the round's structure without its additions
+                    refit = if dropped.is_empty() {
+                        previous.clone()
+                    } else {
+                        let back = iterate_warm(before_adds.clone(), data, &coarse, &mut warm)?;
+                        report.refinements.push(back.iterations);
+                        total_iterations += back.iterations;
+                        history.extend_from_slice(&back.cost_history);
+                        back
+                    };
+                    held_back = true;
+                }
             }
         }
         fit = refit;
@@ -548,7 +594,9 @@ pub fn adapt_modes(
             fit = previous;
             break;
         }
-        if !changed {
+        // additions held back on held-out lines would be proposed again at the same
+        // peaks: the structure is final
+        if !changed || held_back {
             break;
         }
     }

@@ -24,7 +24,7 @@ mod accept;
 mod candidate;
 mod delay_reading;
 mod fitted;
-pub mod held_out;
+use additive_riv::held_out;
 mod refit;
 mod restart;
 mod trial;

@@ -41,7 +41,7 @@ pub struct Trial {
     pub screened: Option<Screened>,
     /// The candidate refitted, for a trial of one proposed candidate.
     pub candidate: Option<Candidate>,
-    /// Its check on interleaved held-out lines ([`super::held_out`]), when it was the
+    /// Its check on interleaved held-out lines ([`additive_riv::held_out`]), when it was the
     /// round's best.
     pub held_out: Option<HeldOutCost>,
 }

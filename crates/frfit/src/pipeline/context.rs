@@ -4,9 +4,9 @@
 //! angular frequencies.
 
 use super::config::{err, FrfType, PipelineConfig, Timings};
-use super::interleave::halves;
 use crate::declared::{declared, Declared};
 use crate::FrfitError;
+use additive_riv::held_out::halves;
 use additive_riv::riv::RivConfig;
 use additive_riv::structure::AdaptConfig;
 use additive_riv::{AdditiveModel, DelayChoice, FitData, FitterConfig, Hold};
@@ -249,7 +249,7 @@ impl FitContext {
     }
 
     /// The fit data split into their even and their odd lines ([`halves`]), for the
-    /// diagnosis's check of a step on held-out lines ([`crate::diagnose::held_out`]):
+    /// diagnosis's check of a step on held-out lines ([`additive_riv::held_out`]):
     /// made on the first call and kept (a copy of the fit data, so not made per round).
     pub fn held_out_halves(&self) -> &[FitData; 2] {
         self.held_out_halves

@@ -10,7 +10,6 @@
 mod config;
 mod context;
 mod first_fit;
-pub mod interleave;
 pub mod nonlinear;
 pub mod pooled_variance;
 mod summarize;
