@@ -1008,7 +1008,7 @@ impl SubspaceInit {
         let raw = |c: f64| c * 2.0 * nl as f64;
         if significance_tests && cfg.order.is_none() && ps.integrators > 0 {
             if let Some((tm, tc, t_cost, why)) =
-                self.integrators_not_supported((&prepared, &g, &factors), &ps, cost, |c| raw(c))?
+                self.integrators_not_supported((&prepared, &g, &factors), &ps, cost, raw)?
             {
                 messages.push(format!(
                     "rigid body: the {} integrators of the singular values left out ({why}; cost {cost:.4e} -> {t_cost:.4e})",
