@@ -162,7 +162,7 @@ pub fn run(a: Args) -> Result<(), Error> {
             let fitted_modes = out.summary.final_model.modes.len();
             let pass = missing.is_empty()
                 && wrong.is_empty()
-                && out.summary.verdict == "noise_limited"
+                && out.summary.verdict == frfit::summary::ResidualVerdict::NoiseLimited
                 && med <= 1e-4
                 && fitted_modes == true_modes;
             n += 1;

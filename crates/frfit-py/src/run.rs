@@ -407,7 +407,7 @@ impl Diagnosis {
     /// `noise_limited`, `nonlinear_distortion` or `unexplained_residual`.
     #[getter]
     fn verdict(&self) -> String {
-        self.out.summary.verdict.clone()
+        self.out.summary.verdict.name().to_string()
     }
     /// The evidence for the verdict, in words with numbers.
     #[getter]

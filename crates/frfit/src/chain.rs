@@ -72,6 +72,11 @@ pub struct AdditiveOptions {
     /// Realizations the data's variance was estimated from, when declared (the ML
     /// refiner's cost test expects `V / N_dof = (R - 1) / (R - 2)` then).
     pub realizations: Option<usize>,
+    /// Real degrees of freedom of each line's variance when it was estimated (`2 (R - 1)`
+    /// from `R` realizations, more when pooled over neighbouring lines): the ML refiner's
+    /// cost test and sample-variance factor ([`ml_refine::sample_variance_factor`]).
+    /// Default: `None` (from `realizations`).
+    pub variance_dof: Option<f64>,
     /// Completion of the CMIF start ([`additive_riv::complete`]): missing modes added
     /// at residual CMIF peaks, the rigid body chosen again with settled poles. Default:
     /// `Some(CompleteConfig::default())`, as [`CmifInitConfig`]; the diagnosis pipeline
@@ -163,6 +168,7 @@ impl Default for AdditiveOptions {
             adapt: Some(AdaptConfig::default()),
             rigid_body: RigidBody::Auto,
             realizations: None,
+            variance_dof: None,
             complete_start: Some(CompleteConfig::default()),
             sk_bands: None,
             starts: None,
@@ -280,6 +286,7 @@ fn make_ml(s: &ChainSettings, o: &AdditiveOptions) -> Box<dyn Refiner> {
         estimator: MlRefine::new(MlConfig {
             weighting: s.weighting.clone(),
             realizations: o.realizations,
+            variance_dof: o.variance_dof,
             progress: s.progress.clone(),
             ..Default::default()
         }),

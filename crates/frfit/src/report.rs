@@ -1114,15 +1114,6 @@ fn cell(s: &str) -> String {
     s.replace('|', "\\|").replace(['\n', '\r'], " ")
 }
 
-fn verdict_text(v: &str) -> String {
-    match v {
-        "noise_limited" => "noise-limited".into(),
-        "nonlinear_distortion" => "nonlinear distortion".into(),
-        "unexplained_residual" => "unexplained residual".into(),
-        other => other.replace('_', " "),
-    }
-}
-
 /// The line-to-line floor against the measured variance, and the final residual
 /// against both: the evidence for (or against) nonlinear distortion.
 fn distortion_section(md: &mut String, d: &DistortionSummary) {
@@ -1332,7 +1323,7 @@ fn markdown(
     let _ = writeln!(
         md,
         "**Verdict: {}.** {}\n",
-        verdict_text(&s.verdict),
+        s.verdict.text(),
         s.verdict_evidence.trim()
     );
 

@@ -12,7 +12,7 @@
 //!               repairs: [{effect: "out_of_band_mode" | "close_pair", params, f_statistic}]},
 //!   "steps": [{effect, accepted, evidence, params, uncertainty, f_statistic, f_critical,
 //!              added_params, before: {..errors}, after: {..errors}, figure}],
-//!   "verdict": "noise_limited" | "nonlinear_distortion" | "unexplained_residual",
+//!   "verdict": "noise_limited" | "nonlinear_distortion" | "unexplained_residual" | "not_analysed",
 //!   "verdict_evidence": "...",
 //!   "distortion": {order, floor_to_variance, floor_to_variance_lower, min_ratio, exceeds,
 //!                  variance_median_rel, floor_median_rel, residual_to_variance,
@@ -286,6 +286,64 @@ pub struct StageTime {
     pub seconds: f64,
 }
 
+/// The verdict on the final residual of a run, written in `summary.json` as its
+/// snake-case name. It compares with those names (`verdict == "noise_limited"`) and
+/// prints as them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResidualVerdict {
+    /// The residual is at the noise level.
+    NoiseLimited,
+    /// The residual exceeds the measured variance but matches the data's line-to-line
+    /// floor, or sits at a total variance whose nonlinear part is significant: no
+    /// linear model gets closer.
+    NonlinearDistortion,
+    /// The residual exceeds the noise and no tested effect explains it.
+    UnexplainedResidual,
+    /// The final residual analysis was not run (`frfit fit` without `--report`).
+    NotAnalysed,
+}
+
+impl ResidualVerdict {
+    /// The name in `summary.json` (`noise_limited`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::NoiseLimited => "noise_limited",
+            Self::NonlinearDistortion => "nonlinear_distortion",
+            Self::UnexplainedResidual => "unexplained_residual",
+            Self::NotAnalysed => "not_analysed",
+        }
+    }
+
+    /// The words for a report (`noise-limited`, ...).
+    pub fn text(self) -> &'static str {
+        match self {
+            Self::NoiseLimited => "noise-limited",
+            Self::NonlinearDistortion => "nonlinear distortion",
+            Self::UnexplainedResidual => "unexplained residual",
+            Self::NotAnalysed => "not analysed",
+        }
+    }
+}
+
+impl std::fmt::Display for ResidualVerdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl PartialEq<str> for ResidualVerdict {
+    fn eq(&self, other: &str) -> bool {
+        self.name() == other
+    }
+}
+
+impl PartialEq<&str> for ResidualVerdict {
+    fn eq(&self, other: &&str) -> bool {
+        self.name() == *other
+    }
+}
+
 /// The whole summary.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
@@ -301,8 +359,9 @@ pub struct Summary {
     pub initial: InitialSummary,
     /// The diagnosis steps, in order.
     pub steps: Vec<StepSummary>,
-    /// `noise_limited`, `nonlinear_distortion` or `unexplained_residual`.
-    pub verdict: String,
+    /// The verdict on the final residual (`noise_limited`, `nonlinear_distortion`,
+    /// `unexplained_residual`, or `not_analysed` in the file).
+    pub verdict: ResidualVerdict,
     /// The evidence for the verdict.
     pub verdict_evidence: String,
     /// The final model.
@@ -467,6 +526,24 @@ impl UncertaintySummary {
 mod tests {
     use super::*;
     use crate::effects::{FactorParams, FactorSupport, ModeParams, PoleParams, Refit};
+
+    /// The file holds the verdict as its name, and reads back into the same verdict.
+    #[test]
+    fn verdicts_are_written_and_read_as_their_names() {
+        for v in [
+            ResidualVerdict::NoiseLimited,
+            ResidualVerdict::NonlinearDistortion,
+            ResidualVerdict::UnexplainedResidual,
+            ResidualVerdict::NotAnalysed,
+        ] {
+            let text = serde_json::to_string(&v).unwrap();
+            assert_eq!(text, format!("\"{}\"", v.name()));
+            assert_eq!(serde_json::from_str::<ResidualVerdict>(&text).unwrap(), v);
+            assert_eq!(v, v.name());
+            assert_eq!(v.to_string(), v.name());
+        }
+        assert!(serde_json::from_str::<ResidualVerdict>("\"noise limited\"").is_err());
+    }
 
     fn step(fitted: FittedEffect) -> StepSummary {
         let e = ErrorStats {

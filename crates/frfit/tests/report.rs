@@ -190,7 +190,7 @@ fn summary(data: &Frf, steps: Vec<StepSummary>, noise: Option<f64>) -> Summary {
             from_fit: None,
         },
         steps,
-        verdict: "noise_limited".into(),
+        verdict: frfit::summary::ResidualVerdict::NoiseLimited,
         verdict_evidence: "residual / noise 1.02 after the missed mode at 120.0 Hz".into(),
         final_model: FinalModelSummary {
             modes: vec![

@@ -35,6 +35,12 @@ pub struct MlConfig {
     /// ratio `(R - 1) / (R - 2)` of the cost test. Default: `None` (the variance is
     /// taken as exact).
     pub realizations: Option<usize>,
+    /// Real degrees of freedom `d` of each line's variance when it was estimated, when
+    /// known: `2 (R - 1)` from `R` realizations, more when it was pooled over
+    /// neighbouring lines. Takes the place of `realizations` in the cost test
+    /// (`E{V / N_dof} = d / (d - 2)`) and sets the sample-variance factor of the
+    /// covariance ([`sample_variance_factor`]). Default: `None` (from `realizations`).
+    pub variance_dof: Option<f64>,
     /// Covariance scaling. Default: [`CovarianceScale::Auto`].
     pub covariance: CovarianceScale,
     /// Iterations and tolerances. Default: [`LmSettings::default`].
@@ -92,6 +98,45 @@ pub struct MlConfig {
     pub progress: ProgressSink,
 }
 
+impl MlConfig {
+    /// The real degrees of freedom of each line's variance: [`MlConfig::variance_dof`],
+    /// else `2 (R - 1)` from [`MlConfig::realizations`] (`R >= 2`); `None` when the
+    /// variance is taken as exact.
+    pub fn variance_dof(&self) -> Option<f64> {
+        self.variance_dof.or_else(|| {
+            self.realizations
+                .filter(|&r| r >= 2)
+                .map(|r| 2.0 * (r as f64 - 1.0))
+        })
+    }
+}
+
+/// The factor `(d - 2) / (d - 4)` by which the covariance of an estimate weighted by
+/// sample variances of `d` real degrees of freedom exceeds the inverse information
+/// formed with those weights and scaled by the cost ratio; 1 for an exact variance
+/// (`None`) and where it is not defined (`d <= 4`).
+///
+/// With the weights `u_k / sigma_k^2`, `u_k = d / chi2_d` independent of the data's
+/// noise (the sample mean and the sample variance of Gaussian realizations are
+/// independent), the linearised estimate has the covariance
+/// `E{u^2} / E{u}^2 F^-1` over many lines (`F` the information with the true
+/// variances), while the information with the sample weights is `E{u} F` and the cost
+/// ratio `V / N_dof` expects `E{u} = d / (d - 2)`, so their product gives `F^-1`. The
+/// ratio `E{u^2} / E{u}^2 = (d - 2) / (d - 4)` is the loss of efficiency of the sample
+/// maximum likelihood estimator, `(M - 2) / (M - 3)` for `M` realizations (Pintelon and
+/// Schoukens, *System Identification: A Frequency Domain Approach*, 2nd ed., on sample
+/// variances): 8 / 7 for the usual 10 realizations, 2 for 4, undefined for 3 and
+/// fewer (the variance of `u` is then infinite: such variances are pooled over
+/// neighbouring lines first). Measured on the wafer stage with 10 realizations before
+/// this factor: frequency z RMS 1.075 (refined IV, 100 draws) and 1.061 (ML, 70 draws),
+/// against `sqrt(8 / 7) = 1.069`.
+pub fn sample_variance_factor(variance_dof: Option<f64>) -> f64 {
+    match variance_dof {
+        Some(d) if d > 4.0 => (d - 2.0) / (d - 4.0),
+        _ => 1.0,
+    }
+}
+
 impl Default for MlConfig {
     fn default() -> Self {
         Self {
@@ -99,6 +144,7 @@ impl Default for MlConfig {
             residues: ResidueForm::Auto,
             feedthrough: None,
             realizations: None,
+            variance_dof: None,
             covariance: CovarianceScale::Auto,
             lm: LmSettings::default(),
             zeta_unstable: 0.01,

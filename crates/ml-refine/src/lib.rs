@@ -31,7 +31,7 @@ pub mod stats;
 pub mod varpro;
 mod weight_groups;
 
-pub use config::{CovarianceScale, MlConfig};
+pub use config::{sample_variance_factor, CovarianceScale, MlConfig};
 pub use error::MlError;
 /// The typed structure steps ([`MlReport::structure_steps`]), from the workspace's one
 /// definition ([`frf_data::structure`]).

@@ -17,7 +17,7 @@
 //! never shrunk). The standard deviations of each mode's natural frequency and damping
 //! follow by the delta method.
 
-pub use crate::config::{CovarianceScale, MlConfig};
+pub use crate::config::{sample_variance_factor, CovarianceScale, MlConfig};
 use crate::lm::covariance;
 use crate::search::{
     add_missed_modes, free_held_delay, rechoose_integrators, retest_modes, Current, Log, Setting,
@@ -530,8 +530,8 @@ impl MlRefine {
         let dof = (n * m) as f64 - n_params as f64 / 2.0;
         let cost = ev.cost;
         let ratio = cost / dof;
-        let (expected, p_value) = cost_test(measured, cfg.realizations, cost, dof);
-        let scale = covariance_scale(cfg.covariance, measured, ratio);
+        let (expected, p_value) = cost_test(measured, cfg.variance_dof(), cost, dof);
+        let scale = covariance_scale(cfg, measured, ratio);
         let n_nl = lay.n_nl();
         let (cov, cond, weakest) =
             covariance(&r, n_nl, &vnorm).map_err(|_| MlError::Unidentifiable {
@@ -788,8 +788,8 @@ impl MlRefine {
         let dof = s.dof(n_params);
         let cost = out.eval.cost;
         let ratio = cost / dof;
-        let (expected, p_value) = cost_test(measured, cfg.realizations, cost, dof);
-        let scale = covariance_scale(cfg.covariance, measured, ratio);
+        let (expected, p_value) = cost_test(measured, cfg.variance_dof(), cost, dof);
+        let scale = covariance_scale(cfg, measured, ratio);
         let n_nl = lay.n_nl();
         let (cov, cond, weakest) =
             covariance(&out.r, n_nl, &out.vnorm).map_err(|_| MlError::Unidentifiable {
@@ -892,6 +892,13 @@ impl MlRefine {
             ));
         }
         if measured {
+            let factor = sample_variance_factor(cfg.variance_dof());
+            if factor > 1.0 && cfg.covariance != CovarianceScale::Fisher {
+                log.messages.push(format!(
+                    "the variance was estimated with {:.0} degrees of freedom per line: the covariance is {factor:.3} times the information's with these weights (the loss of efficiency of sample-variance weights)",
+                    cfg.variance_dof().unwrap_or(f64::NAN)
+                ));
+            }
             if let Some(p) = p_value {
                 if p < 1e-3 {
                     log.messages.push(format!(
@@ -1202,22 +1209,16 @@ impl Unsupported {
 }
 
 /// The cost test of a weighted cost `cost` with `dof` complex degrees of freedom: its
-/// expected ratio `V / N_dof` (1, or `d2 / (d2 - 2)` with `d2 = 2 (R - 1)` for a variance
-/// from `R >= 4` realizations) and the p-value of the observed one (`None` without a
-/// measured variance).
-fn cost_test(
-    measured: bool,
-    realizations: Option<usize>,
-    cost: f64,
-    dof: f64,
-) -> (f64, Option<f64>) {
+/// expected ratio `V / N_dof` (1, or `d / (d - 2)` for a variance of `d > 4` real
+/// degrees of freedom per line, `d = 2 (R - 1)` from `R >= 4` realizations) and the
+/// p-value of the observed one (`None` without a measured variance).
+fn cost_test(measured: bool, variance_dof: Option<f64>, cost: f64, dof: f64) -> (f64, Option<f64>) {
     let ratio = cost / dof;
     if !measured {
         return (1.0, None);
     }
-    match realizations {
-        Some(r) if r >= 4 => {
-            let d2 = 2.0 * (r as f64 - 1.0);
+    match variance_dof {
+        Some(d2) if d2 > 4.0 => {
             let mu = d2 / (d2 - 2.0);
             let var = d2.powi(3) / ((d2 - 2.0).powi(2) * (d2 - 4.0));
             (
@@ -1229,12 +1230,19 @@ fn cost_test(
     }
 }
 
-/// The factor the inverse Fisher information is multiplied by ([`CovarianceScale`]).
-fn covariance_scale(rule: CovarianceScale, measured: bool, ratio: f64) -> f64 {
-    match (rule, measured) {
-        (CovarianceScale::Fisher, _) => 1.0,
+/// The factor the inverse Fisher information is multiplied by ([`CovarianceScale`]);
+/// with a measured variance estimated with `d` degrees of freedom, unless the rule is
+/// the plain Fisher information, also by [`sample_variance_factor`].
+fn covariance_scale(cfg: &MlConfig, measured: bool, ratio: f64) -> f64 {
+    let by_cost = match (cfg.covariance, measured) {
+        (CovarianceScale::Fisher, _) => return 1.0,
         (CovarianceScale::CostRatio, _) | (CovarianceScale::Auto, false) => ratio,
         (CovarianceScale::Auto, true) => ratio.max(1.0),
+    };
+    if measured {
+        by_cost * sample_variance_factor(cfg.variance_dof())
+    } else {
+        by_cost
     }
 }
 

@@ -134,7 +134,7 @@ impl<'a> Setting<'a> {
         let dof = self.dof(n_params);
         self.measured
             && chi2_upper_tail(2.0 * cost, 2.0 * dof) < 1e-3
-            && cost / dof > factor * expected_ratio(self.cfg.realizations)
+            && cost / dof > factor * expected_ratio(self.cfg.variance_dof())
     }
 
     /// A misfit far above the noise (twice the expected ratio): the start holds a free
@@ -208,11 +208,12 @@ const GROUP_PEAK_OVER_MEDIAN: f64 = 20.0;
 /// Lines either side within which a residual peak must be the largest.
 const GROUP_PEAK_HALF_WINDOW: usize = 5;
 
-/// `E{V / N_dof}` with a variance from `realizations` realizations (`(R-1)/(R-2)`), 1
-/// when it is taken as exact.
-pub(crate) fn expected_ratio(realizations: Option<usize>) -> f64 {
-    match realizations {
-        Some(r) if r >= 4 => (r as f64 - 1.0) / (r as f64 - 2.0),
+/// `E{V / N_dof}` with a variance of `d` real degrees of freedom per line
+/// ([`MlConfig::variance_dof`]): `d / (d - 2)` (`(R-1)/(R-2)` for `R` realizations), 1
+/// when it is taken as exact or `d <= 4`.
+pub(crate) fn expected_ratio(variance_dof: Option<f64>) -> f64 {
+    match variance_dof {
+        Some(d) if d > 4.0 => d / (d - 2.0),
         _ => 1.0,
     }
 }

@@ -332,19 +332,10 @@ pub fn diagnose(
     st.repairs_made = repairs
         .filter(|r| r.base_cost.to_bits() == st.cost.to_bits())
         .map(|r| r.trial);
-    let mut steps: Vec<StepSummary> = Vec::new();
-    let mut step_responses = Vec::new();
+    let mut rec = Record::default();
     let mut stages: Vec<(String, f64)> = Vec::new();
     let t_reading = std::time::Instant::now();
-    if suspension_reading(
-        ctx,
-        cfg,
-        &riv,
-        &mut st,
-        &mut steps,
-        &mut step_responses,
-        &mut fit.messages,
-    )? {
+    if suspension_reading(ctx, cfg, &riv, &mut st, &mut rec, &mut fit.messages)? {
         stages.push((
             "diagnose: suspended-body reading".into(),
             t_reading.elapsed().as_secs_f64(),
@@ -372,8 +363,8 @@ pub fn diagnose(
             let accepted = Some(i) == best;
             let before = (&st.response, before);
             // the index of the accepted trial's (first) step
-            let index = steps.len();
-            record_trial(ctx, &tr, accepted, before, &mut steps, &mut step_responses);
+            let index = rec.steps.len();
+            rec.trial(ctx, &tr, accepted, before);
             if accepted {
                 accepted_model = Some((tr.model, tr.cost, index));
             }
@@ -384,7 +375,7 @@ pub fn diagnose(
         // the modes before the step and those the step added: the ones the step and its
         // pruning take out are marked on the steps that added them
         let mut modes_before = refit::mode_list(&st.model);
-        for (j, s) in steps.iter().enumerate().skip(step_index) {
+        for (j, s) in rec.steps.iter().enumerate().skip(step_index) {
             if let (true, FittedEffect::MissedMode { f_hz, zeta }) = (s.accepted, &s.fitted) {
                 st.mode_steps.push((j, *f_hz, *zeta));
                 modes_before.push((*f_hz, *zeta));
@@ -395,7 +386,7 @@ pub fn diagnose(
         let (factor_steps, gone) =
             match_factors(&st.model, &st.factor_steps, &accepted, step_index);
         for g in gone {
-            steps[g].superseded_by = Some(step_index + 1);
+            rec.steps[g].superseded_by = Some(step_index + 1);
         }
         st.factor_steps = factor_steps;
         st.n_accepted += 1;
@@ -444,7 +435,7 @@ pub fn diagnose(
             &mut fit.messages,
         )?;
         for (e, j) in dropped {
-            steps[j].superseded_by = Some(step_index + 1);
+            rec.steps[j].superseded_by = Some(step_index + 1);
             match e {
                 accept::Earlier::Delay { .. } => st.delay_step = None,
                 accept::Earlier::Factor(k) => {
@@ -452,7 +443,7 @@ pub fn diagnose(
                 }
             }
         }
-        st.mark_removed_modes(&modes_before, &m, step_index, &mut steps);
+        st.mark_removed_modes(&modes_before, &m, step_index, &mut rec.steps);
         st.cost = cost;
         st.response = m.response_at(&ctx.omega);
         st.model = m;
@@ -460,26 +451,10 @@ pub fn diagnose(
         st.reanalyze(ctx)?;
         // a loop that reaches the noise level can leave the body's low mode beside an
         // empty free body
-        suspension_reading(
-            ctx,
-            cfg,
-            &riv,
-            &mut st,
-            &mut steps,
-            &mut step_responses,
-            &mut fit.messages,
-        )?;
+        suspension_reading(ctx, cfg, &riv, &mut st, &mut rec, &mut fit.messages)?;
     }
     let t_reading = std::time::Instant::now();
-    if delay_readings(
-        ctx,
-        cfg,
-        &riv,
-        &mut st,
-        &mut steps,
-        &mut step_responses,
-        &mut fit.messages,
-    )? {
+    if delay_readings(ctx, cfg, &riv, &mut st, &mut rec, &mut fit.messages)? {
         stages.push((
             "diagnose: common factors read as a delay".into(),
             t_reading.elapsed().as_secs_f64(),
@@ -503,8 +478,8 @@ pub fn diagnose(
     ));
     Ok(Diagnosis {
         fit,
-        steps,
-        step_responses,
+        steps: rec.steps,
+        step_responses: rec.responses,
         stages,
     })
 }
@@ -521,8 +496,7 @@ fn suspension_reading(
     cfg: &PipelineConfig,
     riv: &RivConfig,
     st: &mut State,
-    steps: &mut Vec<StepSummary>,
-    step_responses: &mut Vec<(ResponseGrid, ResponseGrid)>,
+    rec: &mut Record,
     notes: &mut Vec<String>,
 ) -> Result<bool, FrfitError> {
     if st.analysis.significant || st.n_accepted >= cfg.max_steps {
@@ -557,14 +531,7 @@ fn suspension_reading(
     };
     let accepted = accepted && reading_held_out(ctx, riv, &st.model, &mut tr);
     let before = error_stats(&ctx.band, &st.response, &ctx.noise);
-    let after_resp = record_trial(
-        ctx,
-        &tr,
-        accepted,
-        (&st.response, before),
-        steps,
-        step_responses,
-    );
+    let after_resp = rec.trial(ctx, &tr, accepted, (&st.response, before));
     if accepted {
         st.allowed_increase += (tr.cost - st.cost).max(0.0);
         st.n_accepted += 1;
@@ -573,7 +540,7 @@ fn suspension_reading(
             cfg,
             (tr.model, tr.cost),
             after_resp,
-            steps.len(),
+            rec.steps.len(),
             notes,
         )?;
     }
@@ -591,8 +558,7 @@ fn delay_readings(
     cfg: &PipelineConfig,
     riv: &RivConfig,
     st: &mut State,
-    steps: &mut Vec<StepSummary>,
-    step_responses: &mut Vec<(ResponseGrid, ResponseGrid)>,
+    rec: &mut Record,
     notes: &mut Vec<String>,
 ) -> Result<bool, FrfitError> {
     let mut tested = false;
@@ -639,17 +605,10 @@ fn delay_readings(
         };
         let accepted = accepted && reading_held_out(ctx, riv, &st.model, &mut tr);
         let before = error_stats(&ctx.band, &st.response, &ctx.noise);
-        let index = steps.len();
-        let after_resp = record_trial(
-            ctx,
-            &tr,
-            accepted,
-            (&st.response, before),
-            steps,
-            step_responses,
-        );
+        let index = rec.steps.len();
+        let after_resp = rec.trial(ctx, &tr, accepted, (&st.response, before));
         if accepted {
-            steps[j].superseded_by = Some(index + 1);
+            rec.steps[j].superseded_by = Some(index + 1);
             st.factor_steps.remove(k);
             st.delay_step = Some((index, st.model.factor.delay_s));
             st.n_accepted += 1;
@@ -958,24 +917,34 @@ enum Job {
     Repairs,
 }
 
-/// Records trial `tr` (accepted or not) as its steps, each with the response before it
-/// (`before`: the response and its error statistics) and the one after it; returns the
-/// response after it.
-fn record_trial(
-    ctx: &FitContext,
-    tr: &Trial,
-    accepted: bool,
-    (before_resp, before): (&ResponseGrid, ErrorStats),
-    steps: &mut Vec<StepSummary>,
-    step_responses: &mut Vec<(ResponseGrid, ResponseGrid)>,
-) -> ResponseGrid {
-    let after_resp = tr.model.response_at(&ctx.omega);
-    let after = error_stats(&ctx.band, &after_resp, &ctx.noise);
-    for step in step_summaries(tr, accepted, before, after) {
-        steps.push(step);
-        step_responses.push((before_resp.clone(), after_resp.clone()));
+/// The run's steps as the loop and the readings record them, each with the model
+/// response before it and after it (for the report's figures).
+#[derive(Default)]
+struct Record {
+    steps: Vec<StepSummary>,
+    responses: Vec<(ResponseGrid, ResponseGrid)>,
+}
+
+impl Record {
+    /// Records trial `tr` (accepted or not) as its steps, each with the response before
+    /// it (`before`: the response and its error statistics) and the one after it;
+    /// returns the response after it.
+    fn trial(
+        &mut self,
+        ctx: &FitContext,
+        tr: &Trial,
+        accepted: bool,
+        (before_resp, before): (&ResponseGrid, ErrorStats),
+    ) -> ResponseGrid {
+        let after_resp = tr.model.response_at(&ctx.omega);
+        let after = error_stats(&ctx.band, &after_resp, &ctx.noise);
+        for step in step_summaries(tr, accepted, before, after) {
+            self.steps.push(step);
+            self.responses
+                .push((before_resp.clone(), after_resp.clone()));
+        }
+        after_resp
     }
-    after_resp
 }
 
 /// The steps of `tr`: one, or for a joint missed-mode trial one per mode it added.

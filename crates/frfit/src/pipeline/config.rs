@@ -3,7 +3,7 @@
 //! helpers every stage shares: the error of a failed fit step (`err`) and the wall-clock
 //! time per stage (`Timings`).
 
-use crate::summary::StageTime;
+use crate::summary::{ResidualVerdict, StageTime};
 use crate::FrfitError;
 use additive_riv::{AdditiveModel, DelayChoice, Hold, IvMethod, ModeSelection};
 use frf_data::{ProgressSink, Weighting};
@@ -161,7 +161,7 @@ impl Timings {
 }
 
 /// The summary's verdict when [`PipelineConfig::final_analysis`] is off.
-pub const NOT_ANALYSED: &str = "not_analysed";
+pub const NOT_ANALYSED: ResidualVerdict = ResidualVerdict::NotAnalysed;
 
 /// Entries (`ny x nu`) above which the default chain is `subspace -> ml` ([`default_chain`]).
 pub const LARGE_MIMO_ENTRIES: usize = 100;

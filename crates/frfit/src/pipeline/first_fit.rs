@@ -508,6 +508,7 @@ pub fn chain_fit(
         adapt: fc.adapt.clone(),
         rigid_body: fc.rigid_body,
         realizations: ctx.declared.realizations,
+        variance_dof: ctx.variance_dof,
         // the plain CMIF start: with the completion the loop's steps change on the
         // reference files (a spurious second input_dynamics step on the input-lag case)
         complete_start: None,

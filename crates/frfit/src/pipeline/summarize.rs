@@ -193,13 +193,13 @@ fn verdict(
     distortion: Option<&DistortionSummary>,
     final_errors: &ErrorStats,
     nonlinear: Option<&super::nonlinear::NonlinearTest>,
-) -> (&'static str, String) {
+) -> (ResidualVerdict, String) {
     match nonlinear {
         // the residual at the level of a total variance whose nonlinear part is
         // significant: the model is at what a linear model can reach
         Some(t) if !analysis.significant && t.significant => {
             return (
-                "nonlinear_distortion",
+                ResidualVerdict::NonlinearDistortion,
                 format!(
                     "the residual is at the level of the total variance (noise and stochastic nonlinear distortion over the realizations): residual-to-noise ratio {:.3} (excess {:.3} of the calibrated energy, p = {:.2e}); {}. No linear model gets closer; more realizations measure the distortion more precisely but do not remove it",
                     final_errors.residual_to_noise,
@@ -213,7 +213,7 @@ fn verdict(
     }
     if !analysis.significant {
         return (
-            "noise_limited",
+            ResidualVerdict::NoiseLimited,
             format!(
                 "the residual is at the noise level: residual-to-noise ratio {:.3} (excess {:.3} of the calibrated noise energy, p = {:.2e})",
                 final_errors.residual_to_noise, analysis.significance.excess_ratio, analysis.significance.p_value
@@ -239,7 +239,7 @@ fn verdict(
                 None => String::new(),
             };
             return (
-                "nonlinear_distortion",
+                ResidualVerdict::NonlinearDistortion,
                 format!(
                     "the residual exceeds the measured variance (residual-to-noise ratio {:.3}, p = {:.2e}) but sits at the data's own line-to-line floor: \
                      floor / variance {:.2} (order-{} differences across adjacent lines, model-free; lower bound {:.2}, threshold {}), \
@@ -270,7 +270,7 @@ fn verdict(
         _ => String::new(),
     };
     (
-        "unexplained_residual",
+        ResidualVerdict::UnexplainedResidual,
         format!(
             "the residual exceeds the noise (ratio {:.3}, excess {:.3}, p = {:.2e}) and no tested effect explains it significantly; strongest signatures: {}{floor_note}",
             final_errors.residual_to_noise,
@@ -504,11 +504,13 @@ pub fn model_response_std_at(
 }
 
 /// The ML refiner whose criterion the information at a final model is formed of: the
-/// fit's weighting and the data's stated realizations (the cost test's expectation).
+/// fit's weighting and the degrees of freedom of the data's variance (the cost test's
+/// expectation and the sample-variance factor of the covariance).
 fn information_refiner(ctx: &FitContext) -> ml_refine::MlRefine {
     ml_refine::MlRefine::new(ml_refine::MlConfig {
         weighting: ctx.weighting.clone(),
         realizations: ctx.declared.realizations,
+        variance_dof: ctx.variance_dof,
         ..Default::default()
     })
 }
@@ -567,7 +569,7 @@ pub(crate) fn build_summary(ctx: &FitContext, cfg: &PipelineConfig, run: RunReco
             from_fit: run.from_fit,
         },
         steps: run.steps,
-        verdict: verdict.into(),
+        verdict,
         verdict_evidence,
         final_model: final_model_summary(run.fit),
         final_errors: run.final_errors,
