@@ -81,6 +81,15 @@ pub struct Args {
     /// wafer-stage --seed S`).
     #[arg(long)]
     pub vary_plate: bool,
+    /// `wafer` only: periods of each realization of the experiment (the variance of
+    /// the estimate comes from the realizations). Default: 10.
+    #[arg(long, default_value_t = 10)]
+    pub periods: usize,
+    /// `wafer` only: realizations of the experiment, declared in the data's comments as
+    /// a measurement states them (from 5 down, the pipeline pools the variance over
+    /// neighbouring lines). Default: 10.
+    #[arg(long, default_value_t = 10)]
+    pub realizations: usize,
 }
 
 /// Pooled z statistics.
@@ -326,7 +335,13 @@ fn wafer(a: &Args) -> Result<(), Error> {
     use experiment::synth::{
         ControllerConfig, SimulationPath, WaferStageConfig, WaferStageExperiment,
     };
-    let (periods, realizations) = (10, 10);
+    let (periods, realizations) = (a.periods, a.realizations);
+    if periods < 2 || realizations < 2 {
+        return Err(Error::new(
+            "calibrate",
+            format!("--periods {periods} and --realizations {realizations}: the wafer plant needs at least 2 of each (the variance comes from the realizations)"),
+        ));
+    }
     let mut tally = Tally::default();
     // the plates' true mode counts, fewest and most
     let mut modes = (usize::MAX, 0);

@@ -1,6 +1,7 @@
 //! The structure adaptation ([`additive_riv::adapt_modes`]) reports its changes as typed
 //! structure steps (issue 42): a start that misses a mode gets it back at its residual
-//! peak, and the step says so with the weighted cost before and after.
+//! peak, and the step says so with the weighted cost before and after, on the lines it
+//! was fitted to and on interleaved held-out lines.
 
 mod common;
 
@@ -56,6 +57,17 @@ fn a_mode_the_start_missed_is_a_modes_added_step_with_its_costs() {
             after < 1e-2 * step.cost_before,
             "seed {seed}: cost {:.3e} -> {after:.3e}",
             step.cost_before
+        );
+        // the addition was checked on interleaved held-out lines, and lowered the cost
+        // there too
+        let h = step
+            .held_out
+            .unwrap_or_else(|| panic!("seed {seed}: no held-out check"));
+        assert!(
+            h.after < 1e-2 * h.before,
+            "seed {seed}: held-out cost {:.3e} -> {:.3e}",
+            h.before,
+            h.after
         );
         // the accepted additions are the modes the report lists as added
         assert_eq!(
