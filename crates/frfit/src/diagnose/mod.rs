@@ -851,10 +851,7 @@ fn best_held_out(
         let h = held_out::held_out(ctx.held_out_halves(), riv, current, &trials[i].model);
         trials[i].held_out = h;
         match h {
-            Some(h) if !h.lowers() => trials[i].hold_back(&format!(
-                "not accepted: on interleaved held-out lines (refitted on the even lines and tested on the odd ones, and the reverse) it raises the weighted cost from {:.4e} to {:.4e}",
-                h.before, h.after
-            )),
+            Some(h) if !h.lowers() => trials[i].hold_back(&raises_held_out_cost(&h)),
             _ => return Some(i),
         }
     }
@@ -877,14 +874,19 @@ fn reading_held_out(
     tr.held_out = h;
     match h {
         Some(h) if !h.lowers() => {
-            tr.evidence = format!(
-                "{}; not accepted: on interleaved held-out lines (refitted on the even lines and tested on the odd ones, and the reverse) it raises the weighted cost from {:.4e} to {:.4e}",
-                tr.evidence, h.before, h.after
-            );
+            tr.evidence = format!("{}; {}", tr.evidence, raises_held_out_cost(&h));
             false
         }
         _ => true,
     }
+}
+
+/// Why a step or a reading whose held-out check `h` raised the cost is not accepted.
+fn raises_held_out_cost(h: &frf_data::structure::HeldOutCost) -> String {
+    format!(
+        "not accepted: on interleaved held-out lines (refitted on the even lines and tested on the odd ones, and the reverse) it raises the weighted cost from {:.4e} to {:.4e}",
+        h.before, h.after
+    )
 }
 
 /// Iterations of a candidate's screening refit: a refit that has not converged by then
